@@ -1,0 +1,43 @@
+//! The image edge of the pipeline (decode → extract): bytes in, SIFT
+//! descriptors out as an `ndarray` matrix. This is the only module that touches
+//! OpenCV; everything downstream works on plain arrays.
+
+mod config;
+mod decode;
+mod extract;
+
+pub use config::{ExtractConfig, SiftParams};
+pub use decode::{DecodeLimits, GrayImage, decode, decode_file};
+pub use extract::{Descriptors, extract, extract_file};
+
+/// Why an image yielded no descriptors.
+#[derive(Debug, thiserror::Error)]
+pub enum FeatureError {
+    #[error("the image is empty (0 bytes)")]
+    Empty,
+    #[error("not a decodable image ({0})")]
+    Undecodable(String),
+    #[error("image of {width}×{height} pixels exceeds the limit of {limit} pixels")]
+    TooLarge { width: u64, height: u64, limit: u64 },
+    #[error("{path}: {source}")]
+    Read {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("feature extraction failed: {0}")]
+    OpenCv(String),
+}
+
+impl From<opencv::Error> for FeatureError {
+    fn from(e: opencv::Error) -> Self {
+        Self::OpenCv(e.message)
+    }
+}
+
+/// Number of threads OpenCV may use inside one call. Batch jobs that already
+/// run one image per core set this to 1 to avoid oversubscription.
+pub fn set_opencv_threads(threads: usize) {
+    // Failure only means OpenCV was built without a thread pool.
+    let _ = opencv::core::set_num_threads(threads as i32);
+}

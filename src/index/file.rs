@@ -1,0 +1,107 @@
+//! The map file: JSON `meta` plus the arrays of [`MapArrays`] as sections.
+//! Structure is checked on open (sizes, offsets, string tables); contents are
+//! covered by the section checksums.
+
+use super::{Backing, MapIndex, MapView, Postings, metadata::StrTable};
+use crate::store::{Store, StoreError, StoreWriter};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+const MAGIC: [u8; 8] = *b"BOWLOCMA";
+const VERSION: u32 = 1;
+
+/// What a map is.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct MapMeta {
+    pub name: String,
+    pub images: usize,
+    pub words: usize,
+    /// Total (word, image) entries.
+    pub postings: usize,
+    /// `hash_hex()` of the vocabulary the map was built with.
+    pub vocab_hash: String,
+    /// Names of the pose columns (may be empty).
+    pub pose_fields: Vec<String>,
+    /// Features over all map images.
+    pub features: u64,
+    pub images_without_features: usize,
+}
+
+pub(super) fn save(map: &MapIndex, path: &Path) -> Result<(), StoreError> {
+    let v = map.view();
+    let (offsets, images, weights) = v.postings.raw();
+    StoreWriter::new(MAGIC, VERSION)
+        .json("meta", &map.meta)
+        .f32s("idf", v.idf)
+        .u64s("postings.offsets", offsets)
+        .u32s("postings.images", images)
+        .f32s("postings.weights", weights)
+        .f32s("image_max", v.image_max)
+        .u64s("names.offsets", v.names.offsets)
+        .bytes("names.bytes", v.names.bytes)
+        .u64s("places.offsets", v.places.offsets)
+        .bytes("places.bytes", v.places.bytes)
+        .f64s("poses", v.poses)
+        .write_atomic(path)?;
+    Ok(())
+}
+
+pub(super) fn view(store: &Store) -> Result<MapView<'_>, StoreError> {
+    Ok(MapView {
+        idf: store.f32s("idf")?,
+        postings: Postings::new(
+            store.u64s("postings.offsets")?,
+            store.u32s("postings.images")?,
+            store.f32s("postings.weights")?,
+        ),
+        image_max: store.f32s("image_max")?,
+        names: StrTable {
+            offsets: store.u64s("names.offsets")?,
+            bytes: store.bytes("names.bytes")?,
+        },
+        places: StrTable {
+            offsets: store.u64s("places.offsets")?,
+            bytes: store.bytes("places.bytes")?,
+        },
+        poses: store.f64s("poses")?,
+    })
+}
+
+pub(super) fn open(path: &Path, verify: bool) -> Result<MapIndex, StoreError> {
+    let store = Store::open(path, MAGIC, "map", VERSION, verify)?;
+    let meta: MapMeta = store.json("meta")?;
+    {
+        let v = view(&store)?;
+        let (offsets, images, weights) = v.postings.raw();
+        let bad = |what: String| Err(store.invalid(what));
+        if v.idf.len() != meta.words || offsets.len() != meta.words + 1 {
+            return bad(format!(
+                "{} idf values and {} offsets for {} words",
+                v.idf.len(),
+                offsets.len(),
+                meta.words
+            ));
+        }
+        if images.len() != weights.len()
+            || images.len() != meta.postings
+            || offsets.last().copied() != Some(meta.postings as u64)
+            || offsets.first().copied() != Some(0)
+            || offsets.windows(2).any(|w| w[0] > w[1])
+        {
+            return bad("postings arrays disagree in length".into());
+        }
+        if v.image_max.len() != meta.images
+            || v.names.len() != meta.images
+            || v.places.len() != meta.images
+            || v.poses.len() != meta.images * meta.pose_fields.len()
+        {
+            return bad(format!("per-image arrays do not hold {} images", meta.images));
+        }
+        v.names.validate().map_err(|e| store.invalid(format!("names: {e}")))?;
+        v.places.validate().map_err(|e| store.invalid(format!("places: {e}")))?;
+    }
+    Ok(MapIndex {
+        backing: Backing::Mapped(store),
+        meta,
+    })
+}

@@ -1,0 +1,132 @@
+//! The map index: a tf-idf inverted index over the map's images.
+//!
+//! For map image j with word counts count_j(w) over n_j features:
+//! tf_j(w) = count_j(w)/n_j, idf(w) = ln(N_map/df(w)), d_j = tf_j·idf and
+//! d̂_j = d_j/‖d_j‖. The postings of word w list (j, d̂_j(w)) for every image
+//! holding w, in a flat CSR layout. Per-image metadata (name, place label,
+//! pose) rides along. Built by [`build`], stored and memory-mapped by `file`.
+
+pub mod build;
+mod file;
+pub mod metadata;
+mod postings;
+
+pub use build::{ImageWords, MapBuilder};
+pub use file::MapMeta;
+pub use metadata::{ImageInfo, Places, StringTable};
+pub use postings::Postings;
+
+use crate::store::{Store, StoreError};
+
+/// A map, memory-mapped from a file or held in memory.
+pub struct MapIndex {
+    backing: Backing,
+    meta: MapMeta,
+}
+
+/// The arrays of an in-memory map.
+pub struct MapArrays {
+    pub idf: Vec<f32>,
+    pub offsets: Vec<u64>,
+    pub images: Vec<u32>,
+    pub weights: Vec<f32>,
+    /// max over w of idf(w)·d̂_j(w): the largest share of one feature's vote
+    /// image j can receive (times 1/N).
+    pub image_max: Vec<f32>,
+    pub names: StringTable,
+    pub places: StringTable,
+    /// `images × pose_fields.len()`, NaN where unknown.
+    pub poses: Vec<f64>,
+}
+
+enum Backing {
+    Mapped(Store),
+    Owned(Box<MapArrays>),
+}
+
+/// Borrowed view of every array of a map.
+#[derive(Clone, Copy)]
+pub struct MapView<'a> {
+    pub idf: &'a [f32],
+    pub postings: Postings<'a>,
+    pub image_max: &'a [f32],
+    pub names: metadata::StrTable<'a>,
+    pub places: metadata::StrTable<'a>,
+    pub poses: &'a [f64],
+}
+
+impl MapIndex {
+    pub fn from_arrays(arrays: MapArrays, meta: MapMeta) -> Self {
+        Self {
+            backing: Backing::Owned(Box::new(arrays)),
+            meta,
+        }
+    }
+
+    pub fn meta(&self) -> &MapMeta {
+        &self.meta
+    }
+
+    /// Number of map images.
+    pub fn images(&self) -> usize {
+        self.meta.images
+    }
+
+    /// Number of visual words.
+    pub fn words(&self) -> usize {
+        self.meta.words
+    }
+
+    /// All arrays, borrowed (a handful of lookups: take it once per query).
+    pub fn view(&self) -> MapView<'_> {
+        match &self.backing {
+            Backing::Owned(a) => MapView {
+                idf: &a.idf,
+                postings: Postings::new(&a.offsets, &a.images, &a.weights),
+                image_max: &a.image_max,
+                names: a.names.as_view(),
+                places: a.places.as_view(),
+                poses: &a.poses,
+            },
+            Backing::Mapped(store) => file::view(store).expect("validated on load"),
+        }
+    }
+
+    /// Name, place label and pose of map image `id`.
+    pub fn image(&self, id: u32) -> ImageInfo<'_> {
+        let view = self.view();
+        metadata::image_info(&view, &self.meta.pose_fields, id)
+    }
+
+    /// Open a map file. With `verify`, every checksum is recomputed.
+    pub fn open(path: &std::path::Path, verify: bool) -> Result<Self, StoreError> {
+        file::open(path, verify)
+    }
+
+    /// Open a map file and check it was built with `vocab`.
+    pub fn open_for(
+        path: &std::path::Path,
+        vocab: &crate::vocabulary::Vocabulary,
+        verify: bool,
+    ) -> Result<Self, StoreError> {
+        let map = Self::open(path, verify)?;
+        if map.meta.vocab_hash != vocab.hash_hex() || map.words() != vocab.words() {
+            return Err(StoreError::Invalid {
+                path: path.to_path_buf(),
+                detail: format!(
+                    "map was built with vocabulary {} ({} words), but the loaded vocabulary is {} ({} words)",
+                    map.meta.vocab_hash,
+                    map.words(),
+                    vocab.hash_hex(),
+                    vocab.words()
+                ),
+            });
+        }
+        Ok(map)
+    }
+
+    /// Write atomically to `path`.
+    pub fn save(&self, path: &std::path::Path) -> Result<(), StoreError> {
+        file::save(self, path)
+    }
+}

@@ -1,0 +1,32 @@
+//! bowloc: visual place recognition by bag-of-words search with early stopping.
+//!
+//! A query image runs through the pipeline
+//! **decode → extract → permute → quantize → vote → stop → rank**, and the
+//! crate's layout follows it:
+//!
+//! - [`features`] — decode and extract: image bytes to SIFT/RootSIFT
+//!   descriptors. The only module that touches OpenCV.
+//! - [`search`] — permute, vote, stop and rank: the early-stopping search over
+//!   plain arrays, with the stopping rules in [`search::stop`].
+//! - [`quantize`] — descriptor → nearest visual word, batched through a
+//!   matrix multiply.
+//! - [`vocabulary`] — the visual words (k-means centroids) and their training.
+//! - [`index`] — the map: a tf-idf inverted index over the map's images.
+//! - [`store`] — the memory-mapped, checksummed file format both are kept in.
+//! - [`dataset`] — the shared dataset layout (image lists, ground truth).
+//! - [`pipeline`] — glue used by every front end: extraction over image lists,
+//!   building vocabularies and maps, answering one query.
+//! - [`report`] — the answer to a query as users see it (JSON).
+//!
+//! The algorithmic core (`quantize`, `vocabulary`, `index`, `search`) has no
+//! OpenCV or HTTP types; front ends (`cli`) live at the edges.
+
+pub mod dataset;
+pub mod features;
+pub mod index;
+pub mod pipeline;
+pub mod quantize;
+pub mod report;
+pub mod search;
+pub mod store;
+pub mod vocabulary;

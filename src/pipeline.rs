@@ -1,0 +1,268 @@
+//! The glue every front end shares: extracting descriptors over image lists,
+//! building a vocabulary or a map from images, and answering one query
+//! (decode → extract → search → report).
+
+use crate::dataset::ImageRef;
+use crate::features::{self, DecodeLimits, Descriptors, ExtractConfig, FeatureError};
+use crate::index::{ImageWords, MapBuilder, MapIndex, Places};
+use crate::quantize::Quantizer;
+use crate::report::{EdgeTimings, ImageSize, Localization};
+use crate::search::{self, SearchOptions};
+use crate::vocabulary::kmeans::{KmeansConfig, kmeans};
+use crate::vocabulary::{Vocabulary, VocabularyMeta};
+use anyhow::{Context, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use ndarray::{Array2, ArrayView2, Axis};
+use rayon::prelude::*;
+use std::path::Path;
+use std::time::Instant;
+
+/// A progress bar on stderr (hidden when stderr is not a terminal).
+pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    bar.set_style(
+        ProgressStyle::with_template("{msg:>24} [{bar:40}] {pos}/{len} ({elapsed}, eta {eta})")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    bar.set_message(what.to_owned());
+    bar
+}
+
+/// Descriptors of every image, in parallel, one image per core. Images that
+/// cannot be read or decoded are `None`, each named in a warning, with a count
+/// at the end; with `strict` the first one is an error.
+pub fn extract_all(
+    images: &[ImageRef],
+    config: &ExtractConfig,
+    limits: DecodeLimits,
+    strict: bool,
+    what: &str,
+) -> anyhow::Result<Vec<Option<Descriptors>>> {
+    features::set_opencv_threads(1);
+    let bar = progress_bar(images.len() as u64, what);
+    let results: Vec<Result<Descriptors, FeatureError>> = images
+        .par_iter()
+        .map(|image| {
+            let r = features::extract_file(&image.path, config, limits);
+            bar.inc(1);
+            r
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut out = Vec::with_capacity(images.len());
+    let mut failed = 0;
+    for (image, result) in images.iter().zip(results) {
+        match result {
+            Ok(d) => {
+                if d.nrows() == 0 {
+                    tracing::warn!(image = %image.name, "no features found");
+                }
+                out.push(Some(d));
+            }
+            Err(e) => {
+                if strict {
+                    bail!("{}: {e}", image.path.display());
+                }
+                tracing::warn!(image = %image.path.display(), "skipped: {e}");
+                failed += 1;
+                out.push(None);
+            }
+        }
+    }
+    if failed > 0 {
+        tracing::warn!("{failed} of {} images could not be read and were skipped", images.len());
+    }
+    if out.iter().all(Option::is_none) {
+        bail!("none of the {} images could be read", images.len());
+    }
+    Ok(out)
+}
+
+/// Stack the rows of several descriptor matrices.
+pub fn stack(parts: &[&Descriptors]) -> Array2<f32> {
+    let views: Vec<ArrayView2<'_, f32>> = parts.iter().map(|d| d.view()).collect();
+    if views.is_empty() {
+        return Array2::zeros((0, 128));
+    }
+    ndarray::concatenate(Axis(0), &views).expect("same width")
+}
+
+/// Train a vocabulary on descriptors already extracted with `extract`.
+pub fn train_vocabulary(
+    descriptors: ArrayView2<'_, f32>,
+    extract: &ExtractConfig,
+    config: &KmeansConfig,
+) -> anyhow::Result<Vocabulary> {
+    let bar = progress_bar(config.k as u64, "k-means");
+    let (centroids, report) = kmeans(descriptors, config, &bar)?;
+    bar.finish_and_clear();
+    tracing::info!(
+        words = config.k,
+        iterations = report.iterations,
+        last_change = report.last_change,
+        trained_on = report.trained_on,
+        reseeded = report.reseeded,
+        "vocabulary trained"
+    );
+    Ok(Vocabulary::from_centroids(
+        centroids,
+        VocabularyMeta {
+            extract: extract.clone(),
+            seed: config.seed,
+            trained_on: report.trained_on,
+            iterations: report.iterations,
+            ..Default::default()
+        },
+    ))
+}
+
+/// Extract descriptors from `images` and train a vocabulary on them.
+pub fn build_vocabulary(
+    images: &[ImageRef],
+    extract: &ExtractConfig,
+    config: &KmeansConfig,
+    strict: bool,
+) -> anyhow::Result<Vocabulary> {
+    let all = extract_all(images, extract, DecodeLimits::default(), strict, "extracting")?;
+    let parts: Vec<&Descriptors> = all.iter().flatten().collect();
+    let data = stack(&parts);
+    tracing::info!(descriptors = data.nrows(), images = parts.len(), "training vocabulary");
+    train_vocabulary(data.view(), extract, config)
+}
+
+/// Words of every row of `descriptors`, in parallel blocks.
+pub fn quantize_all(quantizer: &dyn Quantizer, descriptors: ArrayView2<'_, f32>) -> Vec<u32> {
+    let mut words = vec![0u32; descriptors.nrows()];
+    descriptors
+        .axis_chunks_iter(Axis(0), 256)
+        .into_par_iter()
+        .zip(words.par_chunks_mut(256))
+        .for_each(|(block, out)| quantizer.quantize(block, out));
+    words
+}
+
+/// Build a map from per-image descriptors (`None`: unreadable image, kept as
+/// an image without features so ids stay equal to list order).
+pub fn index_descriptors(
+    vocab: &Vocabulary,
+    names: &[String],
+    descriptors: &[Option<Descriptors>],
+    places: Option<&Places>,
+    map_name: &str,
+) -> MapIndex {
+    let quantizer = vocab.exact_quantizer();
+    let bar = progress_bar(names.len() as u64, "quantizing map");
+    let images: Vec<ImageWords> = names
+        .par_iter()
+        .zip(descriptors)
+        .map(|(name, d)| {
+            let words = d
+                .as_ref()
+                .map(|d| quantize_all(&quantizer, d.view()))
+                .unwrap_or_default();
+            bar.inc(1);
+            ImageWords::from_words(name.clone(), &words)
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut builder = MapBuilder::new(vocab.words());
+    for image in images {
+        builder.add(image);
+    }
+    builder.build(map_name, &vocab.hash_hex(), places)
+}
+
+/// Extract descriptors from `images` and index them.
+pub fn build_map(
+    vocab: &Vocabulary,
+    images: &[ImageRef],
+    places: Option<&Places>,
+    map_name: &str,
+    strict: bool,
+) -> anyhow::Result<MapIndex> {
+    let descriptors = extract_all(
+        images,
+        &vocab.meta().extract,
+        DecodeLimits::default(),
+        strict,
+        "extracting map",
+    )?;
+    let names: Vec<String> = images.iter().map(|i| i.name.clone()).collect();
+    if let Some(places) = places {
+        let missing = names
+            .iter()
+            .enumerate()
+            .filter(|(j, n)| places.lookup(n, *j).is_none())
+            .count();
+        if missing > 0 {
+            tracing::warn!("{missing} map images have no row in the places file");
+        }
+    }
+    Ok(index_descriptors(vocab, &names, &descriptors, places, map_name))
+}
+
+/// A loaded vocabulary and map, ready to answer queries.
+pub struct Localizer {
+    pub vocab: Vocabulary,
+    pub map: MapIndex,
+    pub limits: DecodeLimits,
+}
+
+impl Localizer {
+    /// Open both files and check that the map was built with the vocabulary.
+    pub fn open(vocab: &Path, map: &Path, verify: bool) -> anyhow::Result<Self> {
+        let vocab_file = Vocabulary::open(vocab, verify)?;
+        let map = MapIndex::open_for(map, &vocab_file, verify)?;
+        Ok(Self {
+            vocab: vocab_file,
+            map,
+            limits: DecodeLimits::default(),
+        })
+    }
+
+    /// Answer one query image given as encoded bytes.
+    pub fn localize(
+        &self,
+        bytes: &[u8],
+        options: &SearchOptions,
+    ) -> Result<Localization, FeatureError> {
+        let started = Instant::now();
+        let image = features::decode(bytes, self.limits)?;
+        let decoded = Instant::now();
+        let descriptors = features::extract(&image, &self.vocab.meta().extract)?;
+        let edge = EdgeTimings {
+            decode: decoded - started,
+            extract: decoded.elapsed(),
+        };
+        let size = ImageSize {
+            width: image.width(),
+            height: image.height(),
+        };
+        Ok(self.search(descriptors.view(), options, size, edge))
+    }
+
+    /// Run the search over extracted descriptors and build the report.
+    pub fn search(
+        &self,
+        descriptors: ArrayView2<'_, f32>,
+        options: &SearchOptions,
+        size: ImageSize,
+        edge: EdgeTimings,
+    ) -> Localization {
+        let quantizer = self.vocab.exact_quantizer();
+        let outcome = search::search(&quantizer, &self.map, descriptors, options);
+        Localization::new(&self.map, &options.rule, options.seed, size, outcome, edge)
+    }
+
+    /// Read a file and answer it as a query.
+    pub fn localize_file(
+        &self,
+        path: &Path,
+        options: &SearchOptions,
+    ) -> anyhow::Result<Localization> {
+        let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        self.localize(&bytes, options)
+            .with_context(|| format!("{}", path.display()))
+    }
+}

@@ -1,0 +1,32 @@
+//! Quantization: each descriptor → the id of its nearest visual word. The
+//! expensive step of bag-of-words search, so it is batched: descriptors come in
+//! small blocks and distances to all centroids are one matrix multiply.
+
+mod exact;
+
+pub use exact::{ExactQuantizer, squared_norms};
+
+use ndarray::ArrayView2;
+
+/// Maps descriptor rows to visual-word ids.
+pub trait Quantizer: Send + Sync {
+    /// Number of words (centroids).
+    fn words(&self) -> usize;
+    /// Descriptor dimension.
+    fn dim(&self) -> usize;
+    /// Write the nearest word of each row of `block` into `out[..block.nrows()]`.
+    fn quantize(&self, block: ArrayView2<'_, f32>, out: &mut [u32]);
+}
+
+/// Nearest word by exhaustive search, one descriptor at a time: the reference
+/// the fast kernels are tested against.
+pub fn naive_nearest(centroids: ArrayView2<'_, f32>, x: &[f32]) -> u32 {
+    let mut best = (f32::INFINITY, 0u32);
+    for (k, c) in centroids.rows().into_iter().enumerate() {
+        let d: f32 = c.iter().zip(x).map(|(a, b)| (a - b) * (a - b)).sum();
+        if d < best.0 {
+            best = (d, k as u32);
+        }
+    }
+    best.1
+}

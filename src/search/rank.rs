@@ -1,0 +1,43 @@
+//! Ranking: the top-n map images by vote, with each score rescaled to an
+//! estimate of its full bag-of-words score so scores compare across queries
+//! whatever the stop point.
+
+use super::vote::Voter;
+
+/// One ranked map image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ranked {
+    pub id: u32,
+    /// h(j)·N/t: under a uniformly random feature order the partial sum over t
+    /// of N features, scaled by N/t, is an unbiased estimate of the full h(j).
+    pub score: f32,
+}
+
+/// The `n` highest-voted images (ties broken by lower id), scores at least
+/// `min_score`.
+pub fn top_n(voter: &Voter<'_>, n: usize, min_score: f32) -> Vec<Ranked> {
+    let t = voter.tally();
+    if t.features == 0 || n == 0 {
+        return Vec::new();
+    }
+    let scale = t.total as f32 / t.features as f32;
+    let h = voter.histogram();
+    let mut ids: Vec<u32> = voter.touched().to_vec();
+    let better = |a: &u32, b: &u32| {
+        h[*b as usize]
+            .total_cmp(&h[*a as usize])
+            .then_with(|| a.cmp(b))
+    };
+    if ids.len() > n {
+        ids.select_nth_unstable_by(n - 1, better);
+        ids.truncate(n);
+    }
+    ids.sort_unstable_by(better);
+    ids.into_iter()
+        .map(|id| Ranked {
+            id,
+            score: h[id as usize] * scale,
+        })
+        .filter(|r| r.score >= min_score)
+        .collect()
+}

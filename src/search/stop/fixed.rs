@@ -1,0 +1,22 @@
+//! Rule `fixed` (f): stop after a fixed fraction f of the features — the
+//! naive baseline every adaptive rule must beat.
+
+use super::{RuleInfo, StopRule, unit_interval};
+use crate::search::vote::Voter;
+
+pub const INFO: RuleInfo = RuleInfo {
+    name: "fixed",
+    parameter: Some("fraction"),
+    about: "stop after a fixed fraction f of the features",
+    make: |f| Ok(Box::new(Fixed(unit_interval("fraction", f, true)?))),
+};
+
+struct Fixed(f64);
+
+impl StopRule for Fixed {
+    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+        let t = voter.tally();
+        let needed = (self.0 * t.total as f64).ceil() as usize;
+        (t.features >= needed.max(1)).then(|| format!("fixed fraction {} reached", self.0))
+    }
+}

@@ -1,0 +1,28 @@
+//! Rule `hoeffding` (δ): per-feature votes scaled to [0, 1] by the largest
+//! possible vote; stop when the gap between the two best empirical means
+//! reaches √(2·ln(2/δ)/t), Hoeffding's bound on two means of t samples each.
+
+use super::{RuleInfo, StopRule, unit_interval};
+use crate::search::vote::Voter;
+
+pub const INFO: RuleInfo = RuleInfo {
+    name: "hoeffding",
+    parameter: Some("delta"),
+    about: "stop when the top-2 gap of mean votes ≥ √(2·ln(2/δ)/t)",
+    make: |d| Ok(Box::new(Hoeffding(unit_interval("delta", d, false)?))),
+};
+
+struct Hoeffding(f64);
+
+impl StopRule for Hoeffding {
+    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+        let t = voter.tally();
+        if t.features == 0 || t.vote_cap <= 0.0 {
+            return None;
+        }
+        let n = t.features as f64;
+        let gap = (t.max - t.second) as f64 / (n * t.vote_cap as f64);
+        let bound = (2.0 * (2.0 / self.0).ln() / n).sqrt();
+        (gap >= bound).then(|| format!("mean gap {gap:.4} ≥ Hoeffding bound {bound:.4}"))
+    }
+}

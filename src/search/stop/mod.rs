@@ -1,0 +1,128 @@
+//! Stopping rules: after every vote, a rule looks at the histogram's running
+//! statistics and may declare the winner clear. Each rule is one type in its
+//! own file plus one line in [`RULES`]; the rest of the pipeline only knows
+//! the [`StopRule`] trait and [`RuleSpec`].
+
+mod fixed;
+mod hoeffding;
+mod none;
+mod peak_mean;
+mod relative;
+mod stable_peak;
+
+use super::vote::Voter;
+use serde::{Deserialize, Serialize};
+
+/// A rule instance for one query.
+pub trait StopRule: Send {
+    /// Called after each feature's vote; `Some(why)` stops the search.
+    fn check(&mut self, voter: &Voter<'_>) -> Option<String>;
+}
+
+/// A rule's entry in the registry.
+pub struct RuleInfo {
+    /// Name used in the CLI, the API and the config.
+    pub name: &'static str,
+    /// What its single parameter is called (`threshold`, `delta`, ...).
+    pub parameter: Option<&'static str>,
+    /// One line for help texts.
+    pub about: &'static str,
+    /// Check a parameter value and build an instance.
+    pub make: fn(f64) -> Result<Box<dyn StopRule>, String>,
+}
+
+/// Every rule bowloc knows.
+pub const RULES: &[RuleInfo] = &[
+    none::INFO,
+    peak_mean::INFO,
+    relative::INFO,
+    stable_peak::INFO,
+    hoeffding::INFO,
+    fixed::INFO,
+];
+
+/// Look a rule up by name.
+pub fn rule_info(name: &str) -> Option<&'static RuleInfo> {
+    RULES.iter().find(|r| r.name == name)
+}
+
+/// All rule names, for error messages and help.
+pub fn rule_names() -> Vec<&'static str> {
+    RULES.iter().map(|r| r.name).collect()
+}
+
+/// A rule with its parameter, validated.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RuleSpec {
+    pub name: String,
+    /// The rule's parameter (ignored by rules that take none).
+    #[serde(default)]
+    pub parameter: f64,
+}
+
+impl RuleSpec {
+    /// Validate `name` and `parameter` by building the rule once.
+    pub fn new(name: &str, parameter: Option<f64>) -> Result<Self, String> {
+        let info = rule_info(name).ok_or_else(|| {
+            format!(
+                "unknown rule `{name}`; known rules: {}",
+                rule_names().join(", ")
+            )
+        })?;
+        let parameter = match (info.parameter, parameter) {
+            (None, _) => 0.0,
+            (Some(p), None) => return Err(format!("rule `{name}` needs a {p}")),
+            (Some(_), Some(v)) => v,
+        };
+        (info.make)(parameter)?;
+        Ok(Self {
+            name: info.name.to_owned(),
+            parameter,
+        })
+    }
+
+    pub fn info(&self) -> &'static RuleInfo {
+        rule_info(&self.name).expect("validated on construction")
+    }
+
+    /// A fresh instance for one query.
+    pub fn build(&self) -> Box<dyn StopRule> {
+        (self.info().make)(self.parameter).expect("validated on construction")
+    }
+
+    /// Name of the parameter, if the rule takes one.
+    pub fn parameter_name(&self) -> Option<&'static str> {
+        self.info().parameter
+    }
+}
+
+impl std::fmt::Display for RuleSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.parameter_name() {
+            Some(p) => write!(f, "{} ({p} {})", self.name, self.parameter),
+            None => write!(f, "{}", self.name),
+        }
+    }
+}
+
+/// A finite, non-negative parameter.
+fn non_negative(what: &str, v: f64) -> Result<f64, String> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{what} must be a finite number ≥ 0, got {v}"))
+    }
+}
+
+/// A parameter in the open interval (0, 1) (or (0, 1] when `one_ok`).
+fn unit_interval(what: &str, v: f64, one_ok: bool) -> Result<f64, String> {
+    if v > 0.0 && (v < 1.0 || (one_ok && v == 1.0)) {
+        Ok(v)
+    } else {
+        let hi = if one_ok { "1]" } else { "1)" };
+        Err(format!("{what} must lie in (0, {hi}, got {v}"))
+    }
+}
+
+#[cfg(test)]
+mod tests;

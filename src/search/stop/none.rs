@@ -1,0 +1,19 @@
+//! Rule `none`: never stop early (full bag-of-words).
+
+use super::{RuleInfo, StopRule};
+use crate::search::vote::Voter;
+
+pub const INFO: RuleInfo = RuleInfo {
+    name: "none",
+    parameter: None,
+    about: "full bag-of-words: quantize every feature",
+    make: |_| Ok(Box::new(NoStop)),
+};
+
+struct NoStop;
+
+impl StopRule for NoStop {
+    fn check(&mut self, _: &Voter<'_>) -> Option<String> {
+        None
+    }
+}

@@ -1,0 +1,25 @@
+//! Rule 2 (`relative`): stop when (max(h) − mean(h)) / mean(h) > T.
+
+use super::{RuleInfo, StopRule, non_negative};
+use crate::search::vote::Voter;
+
+pub const INFO: RuleInfo = RuleInfo {
+    name: "relative",
+    parameter: Some("threshold"),
+    about: "rule 2: stop when (max(h) − mean(h)) / mean(h) > T",
+    make: |t| Ok(Box::new(Relative(non_negative("threshold", t)?))),
+};
+
+struct Relative(f64);
+
+impl StopRule for Relative {
+    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+        let t = voter.tally();
+        let mean = t.mean();
+        if mean <= 0.0 {
+            return None;
+        }
+        let ratio = (t.max as f64 - mean) / mean;
+        (ratio > self.0).then(|| format!("(max − mean)/mean = {ratio:.4} > {}", self.0))
+    }
+}

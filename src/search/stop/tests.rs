@@ -1,0 +1,119 @@
+//! Each rule on hand-built vote streams. The map has 4 images, image j holding
+//! only word j, so a feature of word j adds exactly u = ln(4)/N to h(j) and
+//! nothing elsewhere: every statistic along a stream is known by hand.
+
+use super::*;
+use crate::index::{ImageWords, MapBuilder, MapIndex};
+use crate::search::vote::Voter;
+
+fn one_word_per_image() -> MapIndex {
+    let mut b = MapBuilder::new(4);
+    for j in 0..4u32 {
+        b.add(ImageWords::from_words(format!("{j}"), &[j]));
+    }
+    b.build("t", "0", None)
+}
+
+/// The feature count (1-based) at which `rule` stops on `stream`, checking
+/// from feature `from` on; `None` if it never does.
+fn stops_at(spec: RuleSpec, stream: &[u32], total: usize, from: usize) -> Option<usize> {
+    let map = one_word_per_image();
+    let view = map.view();
+    let mut voter = Voter::new(&view, total);
+    let mut rule = spec.build();
+    for &w in stream {
+        voter.vote(w);
+        if voter.tally().features >= from && rule.check(&voter).is_some() {
+            return Some(voter.tally().features);
+        }
+    }
+    None
+}
+
+fn u(total: usize) -> f64 {
+    4f64.ln() / total as f64
+}
+
+fn spec(name: &str, p: f64) -> RuleSpec {
+    RuleSpec::new(name, Some(p)).unwrap()
+}
+
+#[test]
+fn peak_mean_stops_exactly_when_gap_exceeds_threshold() {
+    // max − mean along [0,1,0,0,0]: 0.75u, 0.5u, 1.25u, 2u, 2.75u
+    let s = [0, 1, 0, 0, 0];
+    let n = 10;
+    assert_eq!(stops_at(spec("peak-mean", 1.5 * u(n)), &s, n, 1), Some(4));
+    assert_eq!(stops_at(spec("peak-mean", 0.6 * u(n)), &s, n, 1), Some(1));
+    assert_eq!(stops_at(spec("peak-mean", 2.5 * u(n)), &s, n, 1), Some(5));
+    assert_eq!(stops_at(spec("peak-mean", 3.0 * u(n)), &s, n, 1), None);
+}
+
+#[test]
+fn relative_stops_exactly_when_ratio_exceeds_threshold() {
+    // (max − mean)/mean along [0,1,0,0,0]: 3, 1, 5/3, 2, 2.2
+    let s = [0, 1, 0, 0, 0];
+    assert_eq!(stops_at(spec("relative", 2.1), &s, 10, 1), Some(1));
+    assert_eq!(stops_at(spec("relative", 2.1), &s, 10, 2), Some(5));
+    assert_eq!(stops_at(spec("relative", 1.8), &s, 10, 2), Some(4));
+    assert_eq!(stops_at(spec("relative", 2.5), &s, 10, 2), None);
+}
+
+#[test]
+fn stable_peak_counts_features_since_the_last_change() {
+    // leader: 0 from t=1, 1 from t=3, 0 again from t=5
+    let s = [0, 1, 1, 0, 0, 0, 0, 0];
+    assert_eq!(stops_at(spec("stable-peak", 3.0), &s, 10, 1), Some(8));
+    assert_eq!(stops_at(spec("stable-peak", 2.0), &s, 10, 1), Some(7));
+    assert_eq!(stops_at(spec("stable-peak", 1.0), &s, 10, 1), Some(2));
+    assert_eq!(stops_at(spec("stable-peak", 4.0), &s, 10, 1), None);
+}
+
+#[test]
+fn hoeffding_stops_when_gap_meets_bound() {
+    // all votes to image 0: scaled mean gap is 1, bound √(2 ln(2/δ)/t) ≤ 1
+    // from t ≥ 2 ln(2/δ): δ = 0.1 → t ≥ 5.99 → stops at 6.
+    let s = [0u32; 20];
+    assert_eq!(stops_at(spec("hoeffding", 0.1), &s, 20, 1), Some(6));
+    // δ = 0.01 → t ≥ 2 ln 200 = 10.6 → 11
+    assert_eq!(stops_at(spec("hoeffding", 0.01), &s, 20, 1), Some(11));
+    // alternating leaders never separate
+    let alt: Vec<u32> = (0..20).map(|i| i % 2).collect();
+    assert_eq!(stops_at(spec("hoeffding", 0.1), &alt, 20, 1), None);
+}
+
+#[test]
+fn fixed_stops_at_the_fraction() {
+    let s = [3u32; 10];
+    assert_eq!(stops_at(spec("fixed", 0.3), &s, 10, 1), Some(3));
+    assert_eq!(stops_at(spec("fixed", 0.25), &s, 10, 1), Some(3));
+    assert_eq!(stops_at(spec("fixed", 1.0), &s, 10, 1), Some(10));
+}
+
+#[test]
+fn none_never_stops() {
+    let s = [0u32; 10];
+    assert_eq!(stops_at(RuleSpec::new("none", None).unwrap(), &s, 10, 1), None);
+}
+
+#[test]
+fn bad_specs_are_refused_with_reasons() {
+    let err = RuleSpec::new("nope", Some(1.0)).unwrap_err();
+    assert!(err.contains("unknown rule") && err.contains("peak-mean"), "{err}");
+    assert!(RuleSpec::new("peak-mean", None).unwrap_err().contains("threshold"));
+    assert!(RuleSpec::new("peak-mean", Some(f64::NAN)).is_err());
+    assert!(RuleSpec::new("peak-mean", Some(-1.0)).is_err());
+    assert!(RuleSpec::new("hoeffding", Some(0.0)).is_err());
+    assert!(RuleSpec::new("hoeffding", Some(1.0)).is_err());
+    assert!(RuleSpec::new("fixed", Some(1.5)).is_err());
+    assert!(RuleSpec::new("stable-peak", Some(2.5)).is_err());
+    assert!(RuleSpec::new("none", Some(3.0)).is_ok());
+}
+
+#[test]
+fn every_registered_rule_has_a_unique_name() {
+    let mut names = rule_names();
+    names.sort();
+    names.dedup();
+    assert_eq!(names.len(), RULES.len());
+}

@@ -1,0 +1,225 @@
+use super::*;
+use crate::index::{ImageWords, MapBuilder};
+use crate::quantize::{ExactQuantizer, squared_norms};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::collections::HashMap;
+
+const K: usize = 300;
+
+/// Random map: images draw words from overlapping ranges so rankings are
+/// informative; returns the map and each image's raw word list.
+fn random_map(images: usize, seed: u64) -> (MapIndex, Vec<Vec<u32>>) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut b = MapBuilder::new(K);
+    let mut lists = Vec::new();
+    for j in 0..images {
+        let centre = rng.random_range(0..K);
+        let n = rng.random_range(20..80);
+        let words: Vec<u32> = (0..n)
+            .map(|_| ((centre + rng.random_range(0..40)) % K) as u32)
+            .collect();
+        b.add(ImageWords::from_words(format!("img{j}"), &words));
+        lists.push(words);
+    }
+    (b.build("random", "0", None), lists)
+}
+
+/// tf-idf cosine ranking computed directly from raw counts, independently of
+/// the index: score_j = q·d̂_j with q(w) = count_q(w)/N·idf(w).
+fn brute_force(lists: &[Vec<u32>], query: &[u32]) -> Vec<(u32, f64)> {
+    let n_images = lists.len() as f64;
+    let count = |l: &[u32]| {
+        let mut m: HashMap<u32, f64> = HashMap::new();
+        for &w in l {
+            *m.entry(w).or_default() += 1.0;
+        }
+        m
+    };
+    let counts: Vec<HashMap<u32, f64>> = lists.iter().map(|l| count(l)).collect();
+    let mut df: HashMap<u32, f64> = HashMap::new();
+    for c in &counts {
+        for &w in c.keys() {
+            *df.entry(w).or_default() += 1.0;
+        }
+    }
+    let idf = |w: u32| df.get(&w).map_or(0.0, |&d| (n_images / d).ln());
+    let q = count(query);
+    let nq = query.len() as f64;
+    let mut scores: Vec<(u32, f64)> = counts
+        .iter()
+        .zip(lists)
+        .enumerate()
+        .map(|(j, (c, l))| {
+            let nj = l.len() as f64;
+            let d: HashMap<u32, f64> = c.iter().map(|(&w, &k)| (w, k / nj * idf(w))).collect();
+            let norm = d.values().map(|v| v * v).sum::<f64>().sqrt();
+            let dot: f64 = q
+                .iter()
+                .map(|(&w, &k)| k / nq * idf(w) * d.get(&w).copied().unwrap_or(0.0))
+                .sum();
+            (j as u32, if norm > 0.0 { dot / norm } else { 0.0 })
+        })
+        .filter(|&(_, s)| s > 0.0)
+        .collect();
+    scores.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    scores
+}
+
+fn opts(rule: &str, p: Option<f64>, seed: u64) -> SearchOptions {
+    SearchOptions {
+        rule: RuleSpec::new(rule, p).unwrap(),
+        top_n: 10,
+        seed,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn full_bow_ranking_equals_brute_force_tfidf_cosine() {
+    let (map, lists) = random_map(60, 1);
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    for q in 0..20 {
+        // queries: noisy copies of map images
+        let base = &lists[q * 3];
+        let query: Vec<u32> = base
+            .iter()
+            .map(|&w| {
+                if rng.random::<f32>() < 0.3 {
+                    rng.random_range(0..K as u32)
+                } else {
+                    w
+                }
+            })
+            .collect();
+        let got = search_words(&map, &query, &opts("none", None, q as u64));
+        assert_eq!(got.features_used, query.len());
+        assert_eq!(got.stop.kind, StopKind::Exhausted);
+        let want = brute_force(&lists, &query);
+        assert_eq!(got.candidates.len(), 10.min(want.len()));
+        for (g, w) in got.candidates.iter().zip(&want) {
+            assert!(
+                (g.score as f64 - w.1).abs() < 1e-4,
+                "query {q}: score {} vs {}",
+                g.score,
+                w.1
+            );
+            // equal ids unless two brute-force scores tie within rounding
+            if g.id != w.0 {
+                let other = want.iter().find(|x| x.0 == g.id).unwrap();
+                assert!((other.1 - w.1).abs() < 1e-5, "query {q}: rank differs");
+            }
+        }
+    }
+}
+
+#[test]
+fn same_seed_same_outcome_different_seeds_differ() {
+    let (map, lists) = random_map(40, 3);
+    let query = &lists[5];
+    let run = |seed| search_words(&map, query, &opts("stable-peak", Some(8.0), seed));
+    let a = run(7);
+    let b = run(7);
+    assert_eq!(a.candidates, b.candidates);
+    assert_eq!(a.stop, b.stop);
+    let stops: std::collections::HashSet<usize> =
+        (0..30).map(|s| run(s).stop.at_feature).collect();
+    assert!(stops.len() > 1, "every seed stopped at the same feature");
+}
+
+#[test]
+fn stop_point_does_not_depend_on_block_size() {
+    let (map, lists) = random_map(40, 4);
+    let query = &lists[9];
+    let reference = search_words(&map, query, &opts("fixed", Some(0.37), 5));
+    assert_eq!(
+        reference.features_used,
+        (0.37 * query.len() as f64).ceil() as usize
+    );
+    for block in [1, 3, 7, 32, 1000] {
+        let o = SearchOptions {
+            block,
+            ..opts("fixed", Some(0.37), 5)
+        };
+        let got = search_words(&map, query, &o);
+        assert_eq!(got.features_used, reference.features_used, "block {block}");
+        assert_eq!(got.candidates, reference.candidates, "block {block}");
+    }
+}
+
+#[test]
+fn early_scores_are_unbiased_estimates_of_full_scores() {
+    let (map, lists) = random_map(30, 6);
+    let query = &lists[2];
+    let full = search_words(&map, query, &opts("none", None, 0));
+    let target = full.candidates[0];
+    let runs = 3000;
+    let mut sum = 0.0f64;
+    for seed in 0..runs {
+        let o = SearchOptions {
+            top_n: 30,
+            ..opts("fixed", Some(0.5), seed)
+        };
+        let got = search_words(&map, query, &o);
+        sum += got
+            .candidates
+            .iter()
+            .find(|c| c.id == target.id)
+            .map_or(0.0, |c| c.score as f64);
+    }
+    let mean = sum / runs as f64;
+    let rel = (mean - target.score as f64).abs() / target.score as f64;
+    assert!(rel < 0.02, "mean early score {mean} vs full {}", target.score);
+}
+
+#[test]
+fn descriptor_search_equals_search_over_precomputed_words() {
+    let mut rng = ChaCha8Rng::seed_from_u64(8);
+    let dim = 16;
+    let centroids: Vec<f32> = (0..K * dim).map(|_| rng.random::<f32>()).collect();
+    let norms = squared_norms(&centroids, dim);
+    let q = ExactQuantizer::new(&centroids, &norms, dim);
+    let (map, _) = random_map(30, 9);
+    let desc = ndarray::Array2::from_shape_fn((150, dim), |_| rng.random::<f32>());
+    let mut words = vec![0u32; 150];
+    q.quantize(desc.view(), &mut words);
+    for rule in [("none", None), ("peak-mean", Some(0.05)), ("stable-peak", Some(10.0))] {
+        let o = opts(rule.0, rule.1, 11);
+        let a = search(&q, &map, desc.view(), &o);
+        let b = search_words(&map, &words, &o);
+        assert_eq!(a.candidates, b.candidates, "{rule:?}");
+        assert_eq!(a.stop, b.stop, "{rule:?}");
+    }
+}
+
+#[test]
+fn passed_deadline_and_empty_query_are_defined() {
+    let (map, lists) = random_map(10, 10);
+    let o = SearchOptions {
+        deadline: Some(Instant::now()),
+        ..opts("none", None, 1)
+    };
+    let got = search_words(&map, &lists[0], &o);
+    assert_eq!(got.stop.kind, StopKind::Deadline);
+    assert_eq!(got.features_used, 0);
+    assert!(got.candidates.is_empty());
+
+    let got = search_words(&map, &[], &opts("peak-mean", Some(0.1), 1));
+    assert_eq!(got.stop.kind, StopKind::Exhausted);
+    assert_eq!(got.features_total, 0);
+    assert_eq!(got.fraction_used(), 1.0);
+    assert!(got.candidates.is_empty());
+}
+
+#[test]
+fn min_features_delays_the_rule() {
+    let (map, lists) = random_map(20, 12);
+    let query = &lists[3];
+    let eager = search_words(&map, query, &opts("stable-peak", Some(0.0), 1));
+    assert_eq!(eager.features_used, 1);
+    let o = SearchOptions {
+        min_features: 15,
+        ..opts("stable-peak", Some(0.0), 1)
+    };
+    assert_eq!(search_words(&map, query, &o).features_used, 15);
+}
