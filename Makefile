@@ -1,0 +1,19 @@
+# The two quick-start commands: `make run` and `make test`.
+.PHONY: setup build run test bench
+
+setup:
+	@bash scripts/setup.sh
+
+build: setup
+	cargo build --release
+
+# Serve on the default map (built from ../shared/datasets if missing).
+run: build
+	./target/release/bowloc serve --config config/default.toml
+
+# Unit, integration and curl-suite tests.
+test: setup
+	cargo test --release
+
+bench: setup
+	cargo bench

@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Install the system packages bowloc needs on Debian bookworm (idempotent:
+# does nothing when they are already there).
+set -euo pipefail
+packages=(libopencv-dev clang libclang-dev curl jq make ca-certificates)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "installing: ${missing[*]}" >&2
+  sudo=""
+  [ "$(id -u)" -eq 0 ] || sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
