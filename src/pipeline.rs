@@ -71,7 +71,10 @@ pub fn extract_all(
         }
     }
     if failed > 0 {
-        tracing::warn!("{failed} of {} images could not be read and were skipped", images.len());
+        tracing::warn!(
+            "{failed} of {} images could not be read and were skipped",
+            images.len()
+        );
     }
     if out.iter().all(Option::is_none) {
         bail!("none of the {} images could be read", images.len());
@@ -124,10 +127,20 @@ pub fn build_vocabulary(
     config: &KmeansConfig,
     strict: bool,
 ) -> anyhow::Result<Vocabulary> {
-    let all = extract_all(images, extract, DecodeLimits::default(), strict, "extracting")?;
+    let all = extract_all(
+        images,
+        extract,
+        DecodeLimits::default(),
+        strict,
+        "extracting",
+    )?;
     let parts: Vec<&Descriptors> = all.iter().flatten().collect();
     let data = stack(&parts);
-    tracing::info!(descriptors = data.nrows(), images = parts.len(), "training vocabulary");
+    tracing::info!(
+        descriptors = data.nrows(),
+        images = parts.len(),
+        "training vocabulary"
+    );
     train_vocabulary(data.view(), extract, config)
 }
 
@@ -199,7 +212,13 @@ pub fn build_map(
             tracing::warn!("{missing} map images have no row in the places file");
         }
     }
-    Ok(index_descriptors(vocab, &names, &descriptors, places, map_name))
+    Ok(index_descriptors(
+        vocab,
+        &names,
+        &descriptors,
+        places,
+        map_name,
+    ))
 }
 
 /// A loaded vocabulary and map, ready to answer queries.
@@ -261,7 +280,8 @@ impl Localizer {
         path: &Path,
         options: &SearchOptions,
     ) -> anyhow::Result<Localization> {
-        let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        let bytes =
+            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
         self.localize(&bytes, options)
             .with_context(|| format!("{}", path.display()))
     }

@@ -1,0 +1,301 @@
+//! End to end on real images: build a vocabulary and a map from
+//! `rtabmap-loop`'s map images, localize every query, and measure recall@5
+//! against the ground truth; plus the CLI's handling of bad input.
+
+use bowloc::dataset::Dataset;
+use bowloc::features::{DecodeLimits, ExtractConfig};
+use bowloc::pipeline::{Localizer, extract_all, index_descriptors, stack, train_vocabulary};
+use bowloc::search::{RuleSpec, SearchOptions};
+use bowloc::vocabulary::kmeans::KmeansConfig;
+use std::path::PathBuf;
+use std::process::Command;
+
+fn datasets() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets")
+}
+
+fn bowloc() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_bowloc"))
+}
+
+/// Recall@5 with full bag-of-words measured on this dataset at K = 1000,
+/// seed 1 (printed by this test): 43 of 44 queries. The floor leaves room for
+/// small numeric differences across machines, not for a broken pipeline.
+const RECALL_AT_5_FLOOR: f64 = 0.90;
+
+#[test]
+fn rtabmap_loop_recall_at_5_with_full_bow() {
+    let data = Dataset::open(&datasets().join("rtabmap-loop")).unwrap();
+    let extract = ExtractConfig::default();
+    let map_desc = extract_all(&data.map, &extract, DecodeLimits::default(), false, "map").unwrap();
+    let parts: Vec<_> = map_desc.iter().flatten().collect();
+    let vocab = train_vocabulary(
+        stack(&parts).view(),
+        &extract,
+        &KmeansConfig {
+            k: 1000,
+            seed: 1,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let names: Vec<String> = data.map.iter().map(|i| i.name.clone()).collect();
+    let map = index_descriptors(&vocab, &names, &map_desc, None, "rtabmap-loop");
+    assert_eq!(map.images(), 40);
+
+    let dir = tempfile::tempdir().unwrap();
+    let (vpath, mpath) = (dir.path().join("v.bowvoc"), dir.path().join("m.bowmap"));
+    vocab.save(&vpath).unwrap();
+    map.save(&mpath).unwrap();
+    let localizer = Localizer::open(&vpath, &mpath, true).unwrap();
+
+    let options = SearchOptions {
+        rule: RuleSpec::new("none", None).unwrap(),
+        top_n: 5,
+        seed: 1,
+        ..Default::default()
+    };
+    let mut hits = 0;
+    for (q, truth) in data.queries.iter().zip(&data.truth) {
+        let answer = localizer.localize_file(&q.path, &options).unwrap();
+        assert_eq!(answer.features.used, answer.features.total);
+        if answer.candidates.iter().any(|c| truth.contains(&c.id)) {
+            hits += 1;
+        }
+    }
+    let recall = hits as f64 / data.queries_with_match() as f64;
+    println!(
+        "rtabmap-loop recall@5 (rule none, K=1000): {hits}/{} = {recall:.3}",
+        data.queries_with_match()
+    );
+    assert!(
+        recall >= RECALL_AT_5_FLOOR,
+        "recall@5 {recall:.3} below {RECALL_AT_5_FLOOR}"
+    );
+}
+
+/// Runs the CLI and returns (success, stderr).
+fn run(args: &[&str]) -> (bool, String) {
+    let out = bowloc().args(args).output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn cli_reports_bad_input_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let rtab = datasets().join("rtabmap-loop");
+    let map_list = rtab.join("map.txt");
+    let p = |name: &str| d.join(name).to_string_lossy().into_owned();
+
+    // missing image list
+    let (ok, err) = run(&[
+        "vocab",
+        "build",
+        "--images",
+        &p("nope.txt"),
+        "--words",
+        "10",
+        "--out",
+        &p("v"),
+    ]);
+    assert!(!ok && err.contains("nope.txt"), "{err}");
+
+    // empty list
+    std::fs::write(d.join("empty.txt"), "\n").unwrap();
+    let (ok, err) = run(&[
+        "vocab",
+        "build",
+        "--images",
+        &p("empty.txt"),
+        "--words",
+        "10",
+        "--out",
+        &p("v"),
+    ]);
+    assert!(!ok && err.contains("no images"), "{err}");
+
+    // K larger than the number of descriptors
+    std::fs::write(
+        d.join("two.txt"),
+        format!("{}\n", rtab.join("images/1.jpg").display()),
+    )
+    .unwrap();
+    let (ok, err) = run(&[
+        "vocab",
+        "build",
+        "--images",
+        &p("two.txt"),
+        "--words",
+        "100000",
+        "--out",
+        &p("v"),
+    ]);
+    assert!(
+        !ok && err.contains("need at least as many descriptors"),
+        "{err}"
+    );
+
+    // a list with an unreadable entry: skipped with a warning, fatal with --strict
+    std::fs::write(d.join("junk.jpg"), b"not an image").unwrap();
+    let list = format!(
+        "{}\n{}\n{}\n",
+        rtab.join("images/1.jpg").display(),
+        rtab.join("images/2.jpg").display(),
+        d.join("junk.jpg").display()
+    );
+    std::fs::write(d.join("mixed.txt"), list).unwrap();
+    let (ok, err) = run(&[
+        "vocab",
+        "build",
+        "--images",
+        &p("mixed.txt"),
+        "--words",
+        "20",
+        "--out",
+        &p("v.bowvoc"),
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("junk.jpg") && err.contains("1 of 3 images"),
+        "{err}"
+    );
+    let (ok, err) = run(&[
+        "vocab",
+        "build",
+        "--images",
+        &p("mixed.txt"),
+        "--words",
+        "20",
+        "--out",
+        &p("w"),
+        "--strict",
+    ]);
+    assert!(!ok && err.contains("junk.jpg"), "{err}");
+
+    // a map from the good vocabulary
+    let (ok, err) = run(&[
+        "map",
+        "build",
+        "--vocab",
+        &p("v.bowvoc"),
+        "--images",
+        &map_list.to_string_lossy(),
+        "--out",
+        &p("m.bowmap"),
+    ]);
+    assert!(ok, "{err}");
+    let query = rtab.join("images/50.jpg").to_string_lossy().into_owned();
+    let (ok, err) = run(&[
+        "query",
+        "--vocab",
+        &p("v.bowvoc"),
+        "--map",
+        &p("m.bowmap"),
+        &query,
+        "--rule",
+        "bogus",
+    ]);
+    assert!(!ok && err.contains("unknown rule"), "{err}");
+    let (ok, err) = run(&[
+        "query",
+        "--vocab",
+        &p("v.bowvoc"),
+        "--map",
+        &p("m.bowmap"),
+        &query,
+        "--rule",
+        "peak-mean",
+    ]);
+    assert!(!ok && err.contains("needs a threshold"), "{err}");
+
+    // truncated and corrupted map files name the file
+    let full = std::fs::read(d.join("m.bowmap")).unwrap();
+    std::fs::write(d.join("cut.bowmap"), &full[..full.len() / 2]).unwrap();
+    let (ok, err) = run(&[
+        "query",
+        "--vocab",
+        &p("v.bowvoc"),
+        "--map",
+        &p("cut.bowmap"),
+        &query,
+    ]);
+    assert!(!ok && err.contains("cut.bowmap"), "{err}");
+    let mut bad = full.clone();
+    let at = full.len() - 100;
+    bad[at] ^= 0xff;
+    std::fs::write(d.join("bad.bowmap"), &bad).unwrap();
+    let (ok, err) = run(&[
+        "query",
+        "--vocab",
+        &p("v.bowvoc"),
+        "--map",
+        &p("bad.bowmap"),
+        &query,
+    ]);
+    assert!(
+        !ok && err.contains("bad.bowmap") && err.contains("checksum"),
+        "{err}"
+    );
+
+    // a vocabulary file given as the map, and a map built with another vocabulary
+    let (ok, err) = run(&[
+        "query",
+        "--vocab",
+        &p("v.bowvoc"),
+        "--map",
+        &p("v.bowvoc"),
+        &query,
+    ]);
+    assert!(!ok && err.contains("not a bowloc map"), "{err}");
+    let (ok, err) = run(&[
+        "vocab",
+        "build",
+        "--images",
+        &p("mixed.txt"),
+        "--words",
+        "20",
+        "--seed",
+        "9",
+        "--out",
+        &p("v2.bowvoc"),
+    ]);
+    assert!(ok, "{err}");
+    let (ok, err) = run(&[
+        "query",
+        "--vocab",
+        &p("v2.bowvoc"),
+        "--map",
+        &p("m.bowmap"),
+        &query,
+    ]);
+    assert!(!ok && err.contains("built with vocabulary"), "{err}");
+
+    // and the good pair answers with JSON
+    let out = bowloc()
+        .args([
+            "query",
+            "--vocab",
+            &p("v.bowvoc"),
+            "--map",
+            &p("m.bowmap"),
+            &query,
+            "--rule",
+            "fixed",
+            "--fraction",
+            "0.5",
+            "--seed",
+            "4",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let used = json[0]["features"]["used"].as_u64().unwrap();
+    let total = json[0]["features"]["total"].as_u64().unwrap();
+    assert_eq!(used, total.div_ceil(2));
+    assert_eq!(json[0]["seed"], 4);
+}
