@@ -172,7 +172,7 @@ pub fn index_descriptors(
         .map(|(name, d)| {
             let words = d
                 .as_ref()
-                .map(|d| quantize_all(&quantizer, d.view()))
+                .map(|d| quantize_all(quantizer, d.view()))
                 .unwrap_or_default();
             bar.inc(1);
             ImageWords::from_words(name.clone(), &words)
@@ -270,7 +270,7 @@ impl Localizer {
         edge: EdgeTimings,
     ) -> Localization {
         let quantizer = self.vocab.exact_quantizer();
-        let outcome = search::search(&quantizer, &self.map, descriptors, options);
+        let outcome = search::search(quantizer, &self.map, descriptors, options);
         Localization::new(&self.map, &options.rule, options.seed, size, outcome, edge)
     }
 

@@ -3,8 +3,10 @@
 //! small blocks and distances to all centroids are one matrix multiply.
 
 mod exact;
+mod kernels;
 
 pub use exact::{ExactQuantizer, squared_norms};
+pub use kernels::Kernel;
 
 use ndarray::ArrayView2;
 
@@ -16,6 +18,18 @@ pub trait Quantizer: Send + Sync {
     fn dim(&self) -> usize;
     /// Write the nearest word of each row of `block` into `out[..block.nrows()]`.
     fn quantize(&self, block: ArrayView2<'_, f32>, out: &mut [u32]);
+}
+
+impl<Q: Quantizer + ?Sized> Quantizer for &Q {
+    fn words(&self) -> usize {
+        (**self).words()
+    }
+    fn dim(&self) -> usize {
+        (**self).dim()
+    }
+    fn quantize(&self, block: ArrayView2<'_, f32>, out: &mut [u32]) {
+        (**self).quantize(block, out)
+    }
 }
 
 /// Nearest word by exhaustive search, one descriptor at a time: the reference

@@ -1,6 +1,6 @@
 use super::*;
 use crate::index::{ImageWords, MapBuilder};
-use crate::quantize::{ExactQuantizer, squared_norms};
+use crate::quantize::ExactQuantizer;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::HashMap;
@@ -180,8 +180,7 @@ fn descriptor_search_equals_search_over_precomputed_words() {
     let mut rng = ChaCha8Rng::seed_from_u64(8);
     let dim = 16;
     let centroids: Vec<f32> = (0..K * dim).map(|_| rng.random::<f32>()).collect();
-    let norms = squared_norms(&centroids, dim);
-    let q = ExactQuantizer::new(&centroids, &norms, dim);
+    let q = ExactQuantizer::new(&centroids, dim);
     let (map, _) = random_map(30, 9);
     let desc = ndarray::Array2::from_shape_fn((150, dim), |_| rng.random::<f32>());
     let mut words = vec![0u32; 150];

@@ -1,5 +1,4 @@
-//! The vocabulary file: sections `meta` (JSON), `centroids` (f32, K × D) and
-//! `norms` (f32, K).
+//! The vocabulary file: sections `meta` (JSON) and `centroids` (f32, K × D).
 
 use super::{Backing, Vocabulary};
 use crate::features::ExtractConfig;
@@ -29,7 +28,6 @@ pub(super) fn save(vocab: &Vocabulary, path: &Path) -> Result<(), StoreError> {
     StoreWriter::new(MAGIC, VERSION)
         .json("meta", &vocab.meta)
         .f32s("centroids", vocab.centroid_slice())
-        .f32s("norms", vocab.norm_slice())
         .write_atomic(path)?;
     Ok(())
 }
@@ -38,24 +36,26 @@ pub(super) fn open(path: &Path, verify: bool) -> Result<Vocabulary, StoreError> 
     let store = Store::open(path, MAGIC, "vocabulary", VERSION, verify)?;
     let meta: VocabularyMeta = store.json("meta")?;
     let centroids = store.f32s("centroids")?;
-    let norms = store.f32s("norms")?;
     if meta.words == 0 || meta.dim == 0 {
         return Err(store.invalid("vocabulary has no words"));
     }
-    if Some(centroids.len()) != meta.words.checked_mul(meta.dim) || norms.len() != meta.words {
+    if Some(centroids.len()) != meta.words.checked_mul(meta.dim) {
         return Err(store.invalid(format!(
-            "meta says {} words of {} dimensions but the file holds {} centroid values and {} norms",
+            "meta says {} words of {} dimensions but the file holds {} centroid values",
             meta.words,
             meta.dim,
-            centroids.len(),
-            norms.len()
+            centroids.len()
         )));
+    }
+    if centroids.iter().any(|v| !v.is_finite()) {
+        return Err(store.invalid("centroids hold NaN or infinite values"));
     }
     let hash = store.section("centroids")?.checksum;
     Ok(Vocabulary {
         backing: Backing::Mapped(store),
         meta,
         hash,
+        exact: Default::default(),
     })
 }
 

@@ -3,7 +3,7 @@
 //! used at query time. Parallel over all cores, and reproducible for a seed:
 //! every parallel step is element-wise or reduced in a fixed order.
 
-use crate::quantize::{ExactQuantizer, Quantizer, squared_norms};
+use crate::quantize::{ExactQuantizer, Quantizer};
 use indicatif::ProgressBar;
 use ndarray::{Array2, ArrayView2};
 use rand::{RngExt, SeedableRng, seq::index::sample};
@@ -181,8 +181,7 @@ fn kmeans_plus_plus(
 /// Nearest centroid of every row, in parallel blocks.
 fn assign_all(x: &[f32], dim: usize, centroids: &Array2<f32>, out: &mut [u32]) {
     let c = centroids.as_slice().expect("standard layout");
-    let norms = squared_norms(c, dim);
-    let q = ExactQuantizer::new(c, &norms, dim);
+    let q = ExactQuantizer::new(c, dim);
     x.par_chunks(CHUNK * dim)
         .zip(out.par_chunks_mut(CHUNK))
         .for_each(|(rows, words)| {

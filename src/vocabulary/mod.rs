@@ -7,7 +7,7 @@ pub mod kmeans;
 
 pub use file::VocabularyMeta;
 
-use crate::quantize::{ExactQuantizer, squared_norms};
+use crate::quantize::ExactQuantizer;
 use crate::store::{Store, StoreError};
 use ndarray::{Array2, ArrayView2};
 
@@ -16,14 +16,13 @@ pub struct Vocabulary {
     backing: Backing,
     meta: VocabularyMeta,
     hash: u64,
+    /// Packed on first use.
+    exact: std::sync::OnceLock<ExactQuantizer>,
 }
 
 enum Backing {
     Mapped(Store),
-    Owned {
-        centroids: Vec<f32>,
-        norms: Vec<f32>,
-    },
+    Owned(Vec<f32>),
 }
 
 impl Vocabulary {
@@ -32,13 +31,14 @@ impl Vocabulary {
         let (k, dim) = centroids.dim();
         meta.words = k;
         meta.dim = dim;
+        let centroids = centroids.as_standard_layout().to_owned();
         let centroids = centroids.into_raw_vec_and_offset().0;
-        let norms = squared_norms(&centroids, dim);
         let hash = crate::store::checksum(bytemuck::cast_slice(&centroids));
         Self {
-            backing: Backing::Owned { centroids, norms },
+            backing: Backing::Owned(centroids),
             meta,
             hash,
+            exact: std::sync::OnceLock::new(),
         }
     }
 
@@ -72,20 +72,15 @@ impl Vocabulary {
     fn centroid_slice(&self) -> &[f32] {
         match &self.backing {
             Backing::Mapped(store) => store.f32s("centroids").expect("validated on load"),
-            Backing::Owned { centroids, .. } => centroids,
+            Backing::Owned(centroids) => centroids,
         }
     }
 
-    fn norm_slice(&self) -> &[f32] {
-        match &self.backing {
-            Backing::Mapped(store) => store.f32s("norms").expect("validated on load"),
-            Backing::Owned { norms, .. } => norms,
-        }
-    }
-
-    /// The exact batched quantizer over these centroids.
-    pub fn exact_quantizer(&self) -> ExactQuantizer<'_> {
-        ExactQuantizer::new(self.centroid_slice(), self.norm_slice(), self.dim())
+    /// The exact batched quantizer over these centroids (packed once, on
+    /// first use).
+    pub fn exact_quantizer(&self) -> &ExactQuantizer {
+        self.exact
+            .get_or_init(|| ExactQuantizer::new(self.centroid_slice(), self.dim()))
     }
 
     /// Open a vocabulary file; `verify` recomputes every checksum.
