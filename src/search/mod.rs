@@ -18,7 +18,7 @@ pub mod vote;
 
 pub use rank::Ranked;
 pub use stop::{RuleSpec, StopRule};
-pub use vote::{Tally, Voter};
+pub use vote::{Needs, Tally, Voter};
 
 use crate::index::MapIndex;
 use crate::quantize::Quantizer;
@@ -146,8 +146,10 @@ pub fn search_with(
 ) -> SearchOutcome {
     let view = map.view();
     let order = permute::permutation(total, options.seed);
-    let mut voter = Voter::new(&view, total);
-    let mut rule = options.rule.build();
+    let mut rule = options.rule.build(&stop::RuleContext {
+        top_n: options.top_n,
+    });
+    let mut voter = Voter::with_needs(&view, total, rule.needs());
     let mut words = vec![0u32; options.block.max(1)];
     let mut timings = SearchTimings::default();
     let mut stop = None;

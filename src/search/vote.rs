@@ -44,6 +44,77 @@ impl Tally {
     }
 }
 
+/// What a stopping rule needs the voter to track beyond the basic tally.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Needs {
+    /// Leading images to keep in order (at least 2 are always kept).
+    pub top: usize,
+    /// Per-image sums of squared per-feature votes.
+    pub squares: bool,
+}
+
+/// The k highest values of a histogram whose entries only grow, kept in
+/// order (value descending, then id ascending). Every image outside the list
+/// is never better than the list's last entry, so an update that does not
+/// beat the last entry costs one comparison.
+#[derive(Debug, Clone)]
+pub struct TopK {
+    k: usize,
+    items: Vec<(f32, u32)>,
+}
+
+fn better(a: (f32, u32), b: (f32, u32)) -> bool {
+    a.0 > b.0 || (a.0 == b.0 && a.1 < b.1)
+}
+
+impl TopK {
+    pub fn new(k: usize) -> Self {
+        Self {
+            k: k.max(1),
+            items: Vec::with_capacity(k.max(1)),
+        }
+    }
+
+    /// Entries, best first: (value, image id).
+    pub fn items(&self) -> &[(f32, u32)] {
+        &self.items
+    }
+
+    /// Image `j` now has value `h` (never lower than before).
+    #[inline]
+    pub fn update(&mut self, j: u32, h: f32) {
+        if self.items.len() == self.k && h < self.items[self.k - 1].0 {
+            return;
+        }
+        self.update_slow(j, h);
+    }
+
+    fn update_slow(&mut self, j: u32, h: f32) {
+        let mut p = match self.items.iter().position(|&(_, id)| id == j) {
+            Some(p) => {
+                self.items[p].0 = h;
+                p
+            }
+            None if self.items.len() < self.k => {
+                self.items.push((h, j));
+                self.items.len() - 1
+            }
+            None => {
+                let last = self.k - 1;
+                if !better((h, j), self.items[last]) {
+                    return;
+                }
+                self.items[last] = (h, j);
+                last
+            }
+        };
+        while p > 0 && better(self.items[p], self.items[p - 1]) {
+            self.items.swap(p, p - 1);
+            p -= 1;
+        }
+    }
+}
+
 /// Vote histogram and its statistics for one query.
 pub struct Voter<'a> {
     postings: Postings<'a>,
@@ -51,6 +122,9 @@ pub struct Voter<'a> {
     image_max: &'a [f32],
     hist: Vec<f32>,
     touched: Vec<u32>,
+    top: TopK,
+    /// Σ v² per image, with its own top 2, when a rule needs them.
+    squares: Option<(Vec<f32>, TopK)>,
     scale: f32,
     tally: Tally,
 }
@@ -58,6 +132,11 @@ pub struct Voter<'a> {
 impl<'a> Voter<'a> {
     /// A voter for a query of `total` features over `map`.
     pub fn new(map: &MapView<'a>, total: usize) -> Self {
+        Self::with_needs(map, total, Needs::default())
+    }
+
+    /// A voter that also tracks what `needs` asks for.
+    pub fn with_needs(map: &MapView<'a>, total: usize, needs: Needs) -> Self {
         let images = map.image_max.len();
         let scale = 1.0 / total.max(1) as f32;
         let vote_cap = map.image_max.iter().copied().fold(0.0, f32::max) * scale;
@@ -67,6 +146,8 @@ impl<'a> Voter<'a> {
             image_max: map.image_max,
             hist: vec![0.0; images],
             touched: Vec::new(),
+            top: TopK::new(needs.top.max(2)),
+            squares: needs.squares.then(|| (vec![0.0; images], TopK::new(2))),
             scale,
             tally: Tally {
                 total,
@@ -80,8 +161,7 @@ impl<'a> Voter<'a> {
     /// Apply the votes of one feature quantized to word `w`.
     #[inline]
     pub fn vote(&mut self, w: u32) {
-        let t = &mut self.tally;
-        t.features += 1;
+        self.tally.features += 1;
         let factor = self.idf.get(w as usize).copied().unwrap_or(0.0) * self.scale;
         if factor <= 0.0 {
             return;
@@ -98,18 +178,21 @@ impl<'a> Voter<'a> {
             }
             *h += v;
             added += v as f64;
-            let h = *h;
-            if t.leader == Some(j) {
-                t.max = h;
-            } else if h > t.max {
-                t.second = t.max;
-                t.max = h;
-                t.leader = Some(j);
-            } else if h > t.second {
-                t.second = h;
+            self.top.update(j, *h);
+            if let Some((sq, sq_top)) = &mut self.squares {
+                let s = &mut sq[j as usize];
+                *s += v * v;
+                sq_top.update(j, *s);
             }
         }
+        let t = &mut self.tally;
         t.sum += added;
+        let items = self.top.items();
+        if let Some(&(max, leader)) = items.first() {
+            t.leader = Some(leader);
+            t.max = max;
+            t.second = items.get(1).map_or(0.0, |e| e.0);
+        }
     }
 
     pub fn tally(&self) -> &Tally {
@@ -124,6 +207,31 @@ impl<'a> Voter<'a> {
     /// Images with a non-zero vote, in the order they first received one.
     pub fn touched(&self) -> &[u32] {
         &self.touched
+    }
+
+    /// The leading images, best first: (h, id). Holds `Needs::top` entries
+    /// (fewer while fewer images have votes).
+    pub fn top(&self) -> &[(f32, u32)] {
+        self.top.items()
+    }
+
+    /// Σ v² of image `j`'s per-feature votes (0 unless `Needs::squares`).
+    pub fn squares_of(&self, j: u32) -> f32 {
+        self.squares
+            .as_ref()
+            .and_then(|(sq, _)| sq.get(j as usize).copied())
+            .unwrap_or(0.0)
+    }
+
+    /// The largest Σ v² of any image other than `j` (0 unless `Needs::squares`).
+    pub fn max_squares_except(&self, j: u32) -> f32 {
+        let Some((_, top)) = &self.squares else {
+            return 0.0;
+        };
+        top.items()
+            .iter()
+            .find(|&&(_, id)| id != j)
+            .map_or(0.0, |e| e.0)
     }
 
     /// Upper bound on what one more feature can add to h(j).
@@ -147,8 +255,18 @@ mod tests {
         let map = b.build("t", "0", None);
         let view = map.view();
         let stream = [1u32, 3, 5, 5, 0, 2, 4, 1, 3, 3, 0];
-        let mut voter = Voter::new(&view, stream.len());
+        let needs = Needs {
+            top: 3,
+            squares: true,
+        };
+        let mut voter = Voter::with_needs(&view, stream.len(), needs);
+        let mut squares = [0f32; 5];
         for &w in &stream {
+            let (ids, ds) = view.postings.list(w);
+            let factor = view.idf[w as usize] / stream.len() as f32;
+            for (&j, &d) in ids.iter().zip(ds) {
+                squares[j as usize] += (factor * d) * (factor * d);
+            }
             voter.vote(w);
             let h = voter.histogram();
             let t = voter.tally();
@@ -168,6 +286,19 @@ mod tests {
             touched.sort_unstable();
             let nonzero: Vec<u32> = (0..5).filter(|&j| h[j as usize] > 0.0).collect();
             assert_eq!(touched, nonzero);
+            // the top 3 of a full sort (value descending, id ascending)
+            let mut order: Vec<(f32, u32)> = (0..5).map(|j| (h[j as usize], j)).collect();
+            order.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+            let want: Vec<(f32, u32)> = order.into_iter().filter(|e| e.0 > 0.0).take(3).collect();
+            assert_eq!(voter.top(), &want[..]);
+            for j in 0..5u32 {
+                assert!((voter.squares_of(j) - squares[j as usize]).abs() < 1e-7);
+                let other = (0..5u32)
+                    .filter(|&i| i != j)
+                    .map(|i| squares[i as usize])
+                    .fold(0.0f32, f32::max);
+                assert!((voter.max_squares_except(j) - other).abs() < 1e-7);
+            }
         }
         assert_eq!(voter.tally().features, stream.len());
     }

@@ -8,7 +8,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "fixed",
     parameter: Some("fraction"),
     about: "stop after a fixed fraction f of the features",
-    make: |f| Ok(Box::new(Fixed(unit_interval("fraction", f, true)?))),
+    make: |f, _| Ok(Box::new(Fixed(unit_interval("fraction", f, true)?))),
 };
 
 struct Fixed(f64);

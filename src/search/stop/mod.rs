@@ -3,20 +3,40 @@
 //! own file plus one line in [`RULES`]; the rest of the pipeline only knows
 //! the [`StopRule`] trait and [`RuleSpec`].
 
+mod confident;
 mod fixed;
 mod hoeffding;
+mod lossless;
 mod none;
 mod peak_mean;
 mod relative;
 mod stable_peak;
 
-use super::vote::Voter;
+use super::vote::{Needs, Voter};
 use serde::{Deserialize, Serialize};
 
 /// A rule instance for one query.
 pub trait StopRule: Send {
     /// Called after each feature's vote; `Some(why)` stops the search.
     fn check(&mut self, voter: &Voter<'_>) -> Option<String>;
+
+    /// What the voter must track for this rule.
+    fn needs(&self) -> Needs {
+        Needs::default()
+    }
+}
+
+/// What a rule may know about the search it runs in.
+#[derive(Debug, Clone, Copy)]
+pub struct RuleContext {
+    /// Candidates the search returns.
+    pub top_n: usize,
+}
+
+impl Default for RuleContext {
+    fn default() -> Self {
+        Self { top_n: 1 }
+    }
 }
 
 /// A rule's entry in the registry.
@@ -28,7 +48,7 @@ pub struct RuleInfo {
     /// One line for help texts.
     pub about: &'static str,
     /// Check a parameter value and build an instance.
-    pub make: fn(f64) -> Result<Box<dyn StopRule>, String>,
+    pub make: fn(f64, &RuleContext) -> Result<Box<dyn StopRule>, String>,
 }
 
 /// Every rule bowloc knows.
@@ -39,6 +59,8 @@ pub const RULES: &[RuleInfo] = &[
     stable_peak::INFO,
     hoeffding::INFO,
     fixed::INFO,
+    lossless::INFO,
+    confident::INFO,
 ];
 
 /// Look a rule up by name.
@@ -74,7 +96,7 @@ impl RuleSpec {
             (Some(p), None) => return Err(format!("rule `{name}` needs a {p}")),
             (Some(_), Some(v)) => v,
         };
-        (info.make)(parameter)?;
+        (info.make)(parameter, &RuleContext::default())?;
         Ok(Self {
             name: info.name.to_owned(),
             parameter,
@@ -86,8 +108,8 @@ impl RuleSpec {
     }
 
     /// A fresh instance for one query.
-    pub fn build(&self) -> Box<dyn StopRule> {
-        (self.info().make)(self.parameter).expect("validated on construction")
+    pub fn build(&self, context: &RuleContext) -> Box<dyn StopRule> {
+        (self.info().make)(self.parameter, context).expect("validated on construction")
     }
 
     /// Name of the parameter, if the rule takes one.

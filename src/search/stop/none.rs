@@ -7,7 +7,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "none",
     parameter: None,
     about: "full bag-of-words: quantize every feature",
-    make: |_| Ok(Box::new(NoStop)),
+    make: |_, _| Ok(Box::new(NoStop)),
 };
 
 struct NoStop;

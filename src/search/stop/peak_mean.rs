@@ -7,7 +7,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "peak-mean",
     parameter: Some("threshold"),
     about: "rule 1: stop when max(h) − mean(h) > T",
-    make: |t| Ok(Box::new(PeakMean(non_negative("threshold", t)?))),
+    make: |t, _| Ok(Box::new(PeakMean(non_negative("threshold", t)?))),
 };
 
 struct PeakMean(f64);

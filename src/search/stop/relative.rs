@@ -7,7 +7,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "relative",
     parameter: Some("threshold"),
     about: "rule 2: stop when (max(h) − mean(h)) / mean(h) > T",
-    make: |t| Ok(Box::new(Relative(non_negative("threshold", t)?))),
+    make: |t, _| Ok(Box::new(Relative(non_negative("threshold", t)?))),
 };
 
 struct Relative(f64);

@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::index::{ImageWords, MapBuilder, MapIndex};
-use crate::search::vote::Voter;
+use crate::search::vote::{Needs, Voter};
 
 fn one_word_per_image() -> MapIndex {
     let mut b = MapBuilder::new(4);
@@ -20,7 +20,7 @@ fn stops_at(spec: RuleSpec, stream: &[u32], total: usize, from: usize) -> Option
     let map = one_word_per_image();
     let view = map.view();
     let mut voter = Voter::new(&view, total);
-    let mut rule = spec.build();
+    let mut rule = spec.build(&RuleContext::default());
     for &w in stream {
         voter.vote(w);
         if voter.tally().features >= from && rule.check(&voter).is_some() {
@@ -61,12 +61,14 @@ fn relative_stops_exactly_when_ratio_exceeds_threshold() {
 
 #[test]
 fn stable_peak_counts_features_since_the_last_change() {
-    // leader: 0 from t=1, 1 from t=3, 0 again from t=5
+    // leader: 0 from t=1 (keeps it at the t=2 tie: ties go to the lower id),
+    // 1 from t=3, 0 again from t=4 (tie at 2u)
     let s = [0, 1, 1, 0, 0, 0, 0, 0];
-    assert_eq!(stops_at(spec("stable-peak", 3.0), &s, 10, 1), Some(8));
-    assert_eq!(stops_at(spec("stable-peak", 2.0), &s, 10, 1), Some(7));
     assert_eq!(stops_at(spec("stable-peak", 1.0), &s, 10, 1), Some(2));
-    assert_eq!(stops_at(spec("stable-peak", 4.0), &s, 10, 1), None);
+    assert_eq!(stops_at(spec("stable-peak", 2.0), &s, 10, 1), Some(6));
+    assert_eq!(stops_at(spec("stable-peak", 3.0), &s, 10, 1), Some(7));
+    assert_eq!(stops_at(spec("stable-peak", 4.0), &s, 10, 1), Some(8));
+    assert_eq!(stops_at(spec("stable-peak", 5.0), &s, 10, 1), None);
 }
 
 #[test]
@@ -88,6 +90,66 @@ fn fixed_stops_at_the_fraction() {
     assert_eq!(stops_at(spec("fixed", 0.3), &s, 10, 1), Some(3));
     assert_eq!(stops_at(spec("fixed", 0.25), &s, 10, 1), Some(3));
     assert_eq!(stops_at(spec("fixed", 1.0), &s, 10, 1), Some(10));
+}
+
+#[test]
+fn lossless_waits_until_the_lead_exceeds_what_is_left() {
+    // top 1; every feature gives u to one image; cap_j = u for all j.
+    // Stream of N = 10 all to image 0: after t, h0 = t·u and the runner-up
+    // has 0 but may gain (10 − t)·u: final once t > 10 − t, i.e. t = 6.
+    let s = [0u32; 10];
+    let lossless = || RuleSpec::new("lossless", None).unwrap();
+    assert_eq!(stops_at(lossless(), &s, 10, 1), Some(6));
+    // with a challenger: [0,0,1,0,0,0,0,0,0,0]: h0 − h1 must exceed (10 − t)·u:
+    // t=6: 5u − u = 4u ≤ 4u; t=7: 6u − u = 5u > 3u
+    let s = [0, 0, 1, 0, 0, 0, 0, 0, 0, 0];
+    assert_eq!(stops_at(lossless(), &s, 10, 1), Some(7));
+}
+
+#[test]
+fn lossless_orders_the_whole_top_n() {
+    let map = one_word_per_image();
+    let view = map.view();
+    // top 2 of 4: image 0 then image 1 must be final and ordered
+    let stream = [0, 1, 0, 1, 0, 0, 0, 0, 0, 0, 0, 1];
+    let mut voter = Voter::with_needs(
+        &view,
+        stream.len(),
+        Needs {
+            top: 3,
+            squares: false,
+        },
+    );
+    let mut rule = RuleSpec::new("lossless", None)
+        .unwrap()
+        .build(&RuleContext { top_n: 2 });
+    let mut stopped = None;
+    for &w in &stream {
+        voter.vote(w);
+        if rule.check(&voter).is_some() {
+            stopped = Some(voter.tally().features);
+            break;
+        }
+    }
+    // after t: need h0 > h1 + (12 − t)u and h1 > 0 + (12 − t)u.
+    // t=9: h0 = 7u, h1 = 2u: 7 > 2 + 3 yes; 2 > 3 no. t=10: 2 > 2 no. t=11: 2 > 1 yes.
+    assert_eq!(stopped, Some(11));
+}
+
+#[test]
+fn confident_needs_more_evidence_for_smaller_delta() {
+    let s = [0u32; 400];
+    let at = |d: f64| stops_at(spec("confident", d), &s, 400, 1).unwrap();
+    assert!(
+        at(0.5) <= at(0.05) && at(0.05) <= at(0.001),
+        "{} {} {}",
+        at(0.5),
+        at(0.05),
+        at(0.001)
+    );
+    // alternating leaders give no evidence
+    let alt: Vec<u32> = (0..400).map(|i| i % 2).collect();
+    assert_eq!(stops_at(spec("confident", 0.1), &alt, 400, 1), None);
 }
 
 #[test]
