@@ -10,6 +10,7 @@ pub mod build;
 mod file;
 pub mod metadata;
 mod postings;
+pub mod synthetic;
 
 pub use build::{ImageWords, MapBuilder};
 pub use file::MapMeta;
