@@ -15,7 +15,11 @@ fn map_file(images: usize) -> PathBuf {
         zipf_map(images, 5_000, 200, 1).save(&path).unwrap();
     }
     let bytes = std::fs::metadata(&path).unwrap().len();
-    eprintln!("{}: {:.1} MiB", path.display(), bytes as f64 / (1 << 20) as f64);
+    eprintln!(
+        "{}: {:.1} MiB",
+        path.display(),
+        bytes as f64 / (1 << 20) as f64
+    );
     path
 }
 

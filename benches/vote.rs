@@ -40,7 +40,11 @@ fn vote(c: &mut Criterion) {
             visited as f64 / QUERY_FEATURES as f64
         );
         group.throughput(Throughput::Elements(visited));
-        for (rule, p) in [("none", None), ("peak-mean", Some(f64::MAX)), ("confident", Some(0.05))] {
+        for (rule, p) in [
+            ("none", None),
+            ("peak-mean", Some(f64::MAX)),
+            ("confident", Some(0.05)),
+        ] {
             // thresholds that never fire: every feature votes and is checked
             let options = SearchOptions {
                 rule: RuleSpec::new(rule, p).unwrap(),

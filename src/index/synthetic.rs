@@ -43,7 +43,9 @@ pub fn zipf_map(images: usize, words: usize, features: usize, seed: u64) -> MapI
         .into_par_iter()
         .map(|j| {
             let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (j as u64).wrapping_mul(0x9E37_79B9));
-            let ws: Vec<u32> = (0..features).map(|_| scramble(zipf.sample(&mut rng), words)).collect();
+            let ws: Vec<u32> = (0..features)
+                .map(|_| scramble(zipf.sample(&mut rng), words))
+                .collect();
             ImageWords::from_words(format!("synthetic/{j}"), &ws)
         })
         .collect();
@@ -58,7 +60,9 @@ pub fn zipf_map(images: usize, words: usize, features: usize, seed: u64) -> MapI
 pub fn zipf_query(words: usize, features: usize, seed: u64) -> Vec<u32> {
     let zipf = Zipf::new(words, 1.0);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    (0..features).map(|_| scramble(zipf.sample(&mut rng), words)).collect()
+    (0..features)
+        .map(|_| scramble(zipf.sample(&mut rng), words))
+        .collect()
 }
 
 /// A fixed bijection of 0..words (multiplication by a unit modulo words).

@@ -1,0 +1,113 @@
+//! A query end to end on real images from `../shared/datasets/gardens-point`
+//! (K = 5 000): decode, extract, and the whole localization with full
+//! bag-of-words and with an early-stopping rule. Before the criterion runs it
+//! prints the median time of every stage over the query set, and the share of
+//! a request that is not SIFT extraction. The vocabulary and map are built
+//! once into `target/bench-data/` and reused.
+
+use bowloc::dataset::Dataset;
+use bowloc::features::{self, DecodeLimits};
+use bowloc::pipeline::{Localizer, build_map, build_vocabulary};
+use bowloc::search::{RuleSpec, SearchOptions};
+use bowloc::vocabulary::kmeans::KmeansConfig;
+use criterion::{Criterion, criterion_group, criterion_main};
+use std::path::PathBuf;
+
+fn localizer() -> (Localizer, Vec<Vec<u8>>) {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let data = Dataset::open(&root.join("../shared/datasets/gardens-point")).unwrap();
+    let dir = root.join("target/bench-data");
+    let (vpath, mpath) = (
+        dir.join("gardens-5000.bowvoc"),
+        dir.join("gardens-5000.bowmap"),
+    );
+    if Localizer::open(&vpath, &mpath, true).is_err() {
+        eprintln!("building the gardens-point vocabulary (K = 5000) and map");
+        let config = KmeansConfig {
+            k: 5000,
+            seed: 1,
+            ..Default::default()
+        };
+        let vocab = build_vocabulary(&data.map, &Default::default(), &config, false).unwrap();
+        vocab.save(&vpath).unwrap();
+        build_map(&vocab, &data.map, None, "gardens-point", false)
+            .unwrap()
+            .save(&mpath)
+            .unwrap();
+    }
+    let queries = data
+        .queries
+        .iter()
+        .step_by(10)
+        .map(|q| std::fs::read(&q.path).unwrap())
+        .collect();
+    features::set_opencv_threads(1);
+    (Localizer::open(&vpath, &mpath, true).unwrap(), queries)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Median per stage over the query set, printed for docs/performance.md.
+fn stage_summary(loc: &Localizer, queries: &[Vec<u8>], options: &SearchOptions, label: &str) {
+    let mut stages: [Vec<f64>; 6] = Default::default();
+    for _ in 0..3 {
+        for q in queries {
+            let r = loc.localize(q, options).unwrap();
+            let t = r.timings_ms;
+            for (s, v) in stages.iter_mut().zip([
+                t.decode,
+                t.extract,
+                t.quantize,
+                t.vote,
+                t.total,
+                r.features.fraction,
+            ]) {
+                s.push(v);
+            }
+        }
+    }
+    let [decode, extract, quantize, vote, total, fraction] = stages.map(median);
+    eprintln!(
+        "{label}: median ms decode {decode:.2}, extract {extract:.2}, quantize {quantize:.2}, vote {vote:.3}, total {total:.2}; \
+         non-extraction share {:.1}%; median fraction of features {fraction:.2}",
+        100.0 * (total - extract) / total
+    );
+}
+
+fn query(c: &mut Criterion) {
+    let (loc, queries) = localizer();
+    let full = SearchOptions {
+        rule: RuleSpec::new("none", None).unwrap(),
+        ..Default::default()
+    };
+    let early = SearchOptions {
+        rule: RuleSpec::new("fixed", Some(0.5)).unwrap(),
+        ..Default::default()
+    };
+    stage_summary(&loc, &queries, &full, "rule none");
+    stage_summary(&loc, &queries, &early, "rule fixed 0.5");
+    let config = &loc.vocab.meta().extract;
+    let mut group = c.benchmark_group("query/gardens-point");
+    group.sample_size(10);
+    let q = &queries[0];
+    group.bench_function("decode", |b| {
+        b.iter(|| features::decode(q, DecodeLimits::default()).unwrap())
+    });
+    let image = features::decode(q, DecodeLimits::default()).unwrap();
+    group.bench_function("extract", |b| {
+        b.iter(|| features::extract(&image, config).unwrap())
+    });
+    group.bench_function("localize/none", |b| {
+        b.iter(|| loc.localize(q, &full).unwrap())
+    });
+    group.bench_function("localize/fixed-0.5", |b| {
+        b.iter(|| loc.localize(q, &early).unwrap())
+    });
+    group.finish();
+}
+
+criterion_group!(benches, query);
+criterion_main!(benches);
