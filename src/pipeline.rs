@@ -5,7 +5,7 @@
 use crate::dataset::ImageRef;
 use crate::features::{self, DecodeLimits, Descriptors, ExtractConfig, FeatureError};
 use crate::index::{ImageWords, MapBuilder, MapIndex, Places};
-use crate::quantize::Quantizer;
+use crate::quantize::{Quantizer, QuantizerKind};
 use crate::report::{EdgeTimings, ImageSize, Localization};
 use crate::search::{self, SearchOptions};
 use crate::vocabulary::kmeans::{KmeansConfig, kmeans};
@@ -226,6 +226,7 @@ pub struct Localizer {
     pub vocab: Vocabulary,
     pub map: MapIndex,
     pub limits: DecodeLimits,
+    pub quantizer: QuantizerKind,
 }
 
 impl Localizer {
@@ -237,6 +238,7 @@ impl Localizer {
             vocab: vocab_file,
             map,
             limits: DecodeLimits::default(),
+            quantizer: QuantizerKind::Exact,
         })
     }
 
@@ -269,8 +271,8 @@ impl Localizer {
         size: ImageSize,
         edge: EdgeTimings,
     ) -> Localization {
-        let quantizer = self.vocab.exact_quantizer();
-        let outcome = search::search(quantizer, &self.map, descriptors, options);
+        let quantizer = self.vocab.quantizer(self.quantizer);
+        let outcome = search::search(&*quantizer, &self.map, descriptors, options);
         Localization::new(&self.map, &options.rule, options.seed, size, outcome, edge)
     }
 

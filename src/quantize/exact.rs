@@ -95,12 +95,25 @@ impl Quantizer for ExactQuantizer {
     }
 
     fn quantize(&self, block: ArrayView2<'_, f32>, out: &mut [u32]) {
+        self.nearest(block, out, None);
+    }
+}
+
+impl ExactQuantizer {
+    /// The nearest word of each row into `words`, and, when asked, its
+    /// distance up to the row's own ‖x‖² (‖c‖² − 2·x·c) into `distances`.
+    pub fn nearest(
+        &self,
+        block: ArrayView2<'_, f32>,
+        words: &mut [u32],
+        mut distances: Option<&mut [f32]>,
+    ) {
         let b = block.nrows();
         if b == 0 {
             return;
         }
         assert_eq!(block.ncols(), self.dim, "descriptor dimension");
-        assert!(out.len() >= b, "one output per row");
+        assert!(words.len() >= b, "one output per row");
         let block = block.as_standard_layout();
         let x = block.as_slice().expect("standard layout");
         BEST.with_borrow_mut(|(best_v, best_i, scratch)| {
@@ -128,11 +141,15 @@ impl Quantizer for ExactQuantizer {
                     );
                 }
             }
-            for (r, o) in out[..b].iter_mut().enumerate() {
-                *o = kernels::reduce_lanes(
+            for r in 0..b {
+                let (d, w) = kernels::reduce_lanes(
                     &best_v[r * LANES..(r + 1) * LANES],
                     &best_i[r * LANES..(r + 1) * LANES],
                 );
+                words[r] = w;
+                if let Some(out) = distances.as_deref_mut() {
+                    out[r] = d;
+                }
             }
         });
     }

@@ -54,15 +54,19 @@ impl Kernel {
 }
 
 /// Fold the 16 lanes of one descriptor into its nearest centroid (ties: the
-/// lower index).
-pub fn reduce_lanes(values: &[f32], indices: &[u32]) -> u32 {
+/// lower index): (distance, index).
+pub fn reduce_lanes(values: &[f32], indices: &[u32]) -> (f32, u32) {
     let mut best = (f32::INFINITY, u32::MAX);
     for (&v, &i) in values.iter().zip(indices) {
         if v < best.0 || (v == best.0 && i < best.1) {
             best = (v, i);
         }
     }
-    if best.1 == u32::MAX { 0 } else { best.1 }
+    if best.1 == u32::MAX {
+        (f32::INFINITY, 0)
+    } else {
+        best
+    }
 }
 
 /// Update `best_v`/`best_i` (`rows × LANES`) of every descriptor in `x`
@@ -101,21 +105,13 @@ pub fn panels_block(
     }
 }
 
-/// The portable path: distances of the block to all centroids by one `gemm`
-/// call into `scratch`, then a lane-wise running minimum.
-pub fn gemm_block(
-    x: &[f32],
-    dim: usize,
-    centroids: &[f32],
-    norms: &[f32],
-    scratch: &mut Vec<f32>,
-    best_v: &mut [f32],
-    best_i: &mut [u32],
-) {
+/// x·c for every row x of `x` (`b × dim`) and every row c of `centroids`
+/// (`k × dim`), by one `gemm` call, into `out` (`b × k`, row-major).
+pub fn gemm_dots(x: &[f32], dim: usize, centroids: &[f32], out: &mut Vec<f32>) {
     let b = x.len() / dim;
-    let k = norms.len();
-    scratch.clear();
-    scratch.resize(b * k, 0.0);
+    let k = centroids.len() / dim;
+    out.clear();
+    out.resize(b * k, 0.0);
     // SAFETY: dst is b × k row-major, lhs b × dim row-major, rhs = centroidsᵀ
     // (dim × k, element (p, j) at centroids[j·dim + p]); extents match.
     unsafe {
@@ -123,7 +119,7 @@ pub fn gemm_block(
             b,
             k,
             dim,
-            scratch.as_mut_ptr(),
+            out.as_mut_ptr(),
             1,
             k as isize,
             false,
@@ -141,6 +137,21 @@ pub fn gemm_block(
             gemm::Parallelism::None,
         );
     }
+}
+
+/// The portable path: distances of the block to all centroids by one `gemm`
+/// call into `scratch`, then a lane-wise running minimum.
+pub fn gemm_block(
+    x: &[f32],
+    dim: usize,
+    centroids: &[f32],
+    norms: &[f32],
+    scratch: &mut Vec<f32>,
+    best_v: &mut [f32],
+    best_i: &mut [u32],
+) {
+    let k = norms.len();
+    gemm_dots(x, dim, centroids, scratch);
     for (r, dots) in scratch.chunks_exact(k).enumerate() {
         let (bv, bi) = (
             &mut best_v[r * LANES..(r + 1) * LANES],

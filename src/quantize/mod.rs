@@ -1,14 +1,30 @@
 //! Quantization: each descriptor → the id of its nearest visual word. The
 //! expensive step of bag-of-words search, so it is batched: descriptors come in
 //! small blocks and distances to all centroids are one matrix multiply.
+//! [`ExactQuantizer`] finds the true nearest word; [`TreeQuantizer`] searches
+//! only the words near a descriptor, for vocabularies of 50 000 words and more.
 
 mod exact;
 mod kernels;
+mod tree;
 
 pub use exact::{ExactQuantizer, squared_norms};
 pub use kernels::Kernel;
+pub use tree::{TreeQuantizer, TreeSearch};
 
 use ndarray::ArrayView2;
+use serde::{Deserialize, Serialize};
+
+/// Which quantizer a query uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "kind", deny_unknown_fields)]
+pub enum QuantizerKind {
+    /// The exact nearest word.
+    #[default]
+    Exact,
+    /// The two-level tree, searching `probes` groups per descriptor.
+    Tree { probes: usize },
+}
 
 /// Maps descriptor rows to visual-word ids.
 pub trait Quantizer: Send + Sync {

@@ -56,6 +56,7 @@ pub(super) fn open(path: &Path, verify: bool) -> Result<Vocabulary, StoreError> 
         meta,
         hash,
         exact: Default::default(),
+        tree: Default::default(),
     })
 }
 

@@ -12,6 +12,8 @@ use rayon::prelude::*;
 
 /// Rows per parallel assignment task.
 const CHUNK: usize = 256;
+/// Largest k seeded with k-means++; larger vocabularies start from random points.
+const PLUS_PLUS_MAX_K: usize = 8192;
 
 #[derive(Debug, Clone)]
 pub struct KmeansConfig {
@@ -88,8 +90,15 @@ pub fn kmeans(
     let seeding = subsample(train, seeding_n, &mut rng);
     let seeding = seeding.as_ref().map_or(train, |a| a.view());
     progress.set_length(k as u64);
-    progress.set_message("k-means++ seeding");
-    let mut centroids = kmeans_plus_plus(seeding, k, &mut rng, progress);
+    let mut centroids = if k <= PLUS_PLUS_MAX_K {
+        progress.set_message("k-means++ seeding");
+        kmeans_plus_plus(seeding, k, &mut rng, progress)
+    } else {
+        // k-means++ makes k sequential passes over its sample: beyond this
+        // size start from k distinct random points and let Lloyd refine them.
+        progress.set_message("random seeding");
+        subsample(train, k, &mut rng).unwrap_or_else(|| train.to_owned())
+    };
 
     progress.set_position(0);
     progress.set_length(config.max_iter as u64);

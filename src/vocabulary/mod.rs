@@ -7,7 +7,7 @@ pub mod kmeans;
 
 pub use file::VocabularyMeta;
 
-use crate::quantize::ExactQuantizer;
+use crate::quantize::{ExactQuantizer, Quantizer, QuantizerKind, TreeQuantizer};
 use crate::store::{Store, StoreError};
 use ndarray::{Array2, ArrayView2};
 
@@ -18,6 +18,8 @@ pub struct Vocabulary {
     hash: u64,
     /// Packed on first use.
     exact: std::sync::OnceLock<ExactQuantizer>,
+    /// Built on first use.
+    tree: std::sync::OnceLock<TreeQuantizer>,
 }
 
 enum Backing {
@@ -39,6 +41,7 @@ impl Vocabulary {
             meta,
             hash,
             exact: std::sync::OnceLock::new(),
+            tree: std::sync::OnceLock::new(),
         }
     }
 
@@ -81,6 +84,53 @@ impl Vocabulary {
     pub fn exact_quantizer(&self) -> &ExactQuantizer {
         self.exact
             .get_or_init(|| ExactQuantizer::new(self.centroid_slice(), self.dim()))
+    }
+
+    /// The two-level tree over these words (built on first use: k-means of
+    /// the K words into ⌈√K⌉ groups).
+    pub fn tree_quantizer(&self) -> &TreeQuantizer {
+        self.tree.get_or_init(|| {
+            let groups = (self.words() as f64).sqrt().ceil() as usize;
+            let config = kmeans::KmeansConfig {
+                k: groups,
+                seed: self.meta.seed,
+                max_iter: 15,
+                train_sample: 0,
+                ..Default::default()
+            };
+            let (centres, report) =
+                kmeans::kmeans(self.centroids(), &config, &indicatif::ProgressBar::hidden())
+                    .expect("⌈√K⌉ ≤ K groups");
+            let mut group_of = vec![0u32; self.words()];
+            let exact = ExactQuantizer::new(centres.as_slice().expect("standard"), self.dim());
+            for (rows, out) in self
+                .centroid_slice()
+                .chunks(256 * self.dim())
+                .zip(group_of.chunks_mut(256))
+            {
+                let block = ArrayView2::from_shape((out.len(), self.dim()), rows).expect("rows");
+                exact.quantize(block, out);
+            }
+            tracing::debug!(
+                groups,
+                iterations = report.iterations,
+                "quantization tree built"
+            );
+            TreeQuantizer::new(
+                self.centroid_slice(),
+                self.dim(),
+                centres.into_raw_vec_and_offset().0,
+                &group_of,
+            )
+        })
+    }
+
+    /// The quantizer of the given kind.
+    pub fn quantizer(&self, kind: QuantizerKind) -> Box<dyn Quantizer + '_> {
+        match kind {
+            QuantizerKind::Exact => Box::new(self.exact_quantizer()),
+            QuantizerKind::Tree { probes } => Box::new(self.tree_quantizer().with_probes(probes)),
+        }
     }
 
     /// Open a vocabulary file; `verify` recomputes every checksum.
