@@ -91,11 +91,19 @@ impl<'a> StoreWriter<'a> {
         if let Some(dir) = dir {
             std::fs::create_dir_all(dir).map_err(|e| StoreError::io(dir, e))?;
         }
-        let mut tmp = match dir {
-            Some(dir) => tempfile::NamedTempFile::new_in(dir),
-            None => tempfile::NamedTempFile::new_in("."),
-        }
-        .map_err(|e| StoreError::io(path, e))?;
+        let name = path
+            .file_name()
+            .map_or("store".into(), |n| n.to_string_lossy());
+        let mut tmp = tempfile::Builder::new()
+            .prefix(&format!(".{name}."))
+            .suffix(".tmp")
+            .tempfile_in(dir.unwrap_or(Path::new(".")))
+            .map_err(|e| StoreError::io(path, e))?;
+        // Test knob: pause between sections so a test can kill a writer mid-file.
+        let pause = std::env::var("BOWLOC_WRITE_DELAY_MS")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .map(std::time::Duration::from_millis);
 
         let sums: Vec<u64> = self.sections.iter().map(|s| checksum(&s.bytes)).collect();
         let table_len = self.sections.len() * ENTRY_LEN;
@@ -128,6 +136,10 @@ impl<'a> StoreWriter<'a> {
             out.write_all(&[0u8; ALIGN][..pad]).map_err(io)?;
             out.write_all(&section.bytes).map_err(io)?;
             written += pad + section.bytes.len();
+            if let Some(pause) = pause {
+                out.flush().map_err(io)?;
+                std::thread::sleep(pause);
+            }
         }
         out.flush().map_err(io)?;
         drop(out);
