@@ -20,7 +20,10 @@ pub struct Vocabulary {
 
 enum Backing {
     Mapped(Store),
-    Owned { centroids: Vec<f32>, norms: Vec<f32> },
+    Owned {
+        centroids: Vec<f32>,
+        norms: Vec<f32>,
+    },
 }
 
 impl Vocabulary {
