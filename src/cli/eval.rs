@@ -21,7 +21,7 @@ pub struct EvalArgs {
     #[arg(long, value_delimiter = ',')]
     rules: Vec<String>,
     /// Warm-ups (min_features) for the calibrated rules; the first is used for the main tables.
-    #[arg(long, value_delimiter = ',', default_values_t = [0usize, 10, 20])]
+    #[arg(long, value_delimiter = ',', default_values_t = [0usize, 20, 100])]
     min_features: Vec<usize>,
     /// Mean fractions of features the calibrated grids aim at.
     #[arg(long, value_delimiter = ',', default_values_t = DEFAULT_TARGETS.to_vec())]

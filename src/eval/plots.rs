@@ -127,6 +127,9 @@ impl Figure for RecallPanel {
             .configure_mesh()
             .x_desc("features used (%)")
             .y_desc("recall top-5 at 90% precision (%)")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0}"))
+            .light_line_style(TRANSPARENT)
             .label_style(("sans-serif", 14))
             .draw()?;
         if let Some(b) = self.baseline {
@@ -200,7 +203,10 @@ impl Figure for FractionHistogram {
         chart
             .configure_mesh()
             .x_desc("features used (%)")
-            .y_desc("queries (%)")
+            .y_desc("queries × runs (%)")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0}"))
+            .light_line_style(TRANSPARENT)
             .label_style(("sans-serif", 14))
             .draw()?;
         chart.draw_series(shares.iter().enumerate().map(|(i, &h)| {

@@ -13,9 +13,19 @@ fn pct(v: f64) -> String {
     format!("{:.1}", 100.0 * v)
 }
 
+/// Milliseconds with about three significant digits.
+fn ms_value(v: f64) -> String {
+    match v {
+        v if v >= 100.0 => format!("{v:.0}"),
+        v if v >= 10.0 => format!("{v:.1}"),
+        v if v >= 1.0 => format!("{v:.2}"),
+        _ => format!("{v:.3}"),
+    }
+}
+
 /// Milliseconds: median / p95.
 fn ms(q: super::timing::Quantiles) -> String {
-    format!("{:.1} / {:.1}", q.median, q.p95)
+    format!("{} / {}", ms_value(q.median), ms_value(q.p95))
 }
 
 /// A markdown table from a header row and body rows.
@@ -56,6 +66,9 @@ fn paper_rows(columns: &[&SettingSummary], parameter: &str) -> Vec<Vec<String>> 
             })
         })
         .collect();
+    rows.push(row("(std over runs, top-5)".into(), &|s| {
+        pct(s.recall90_at(5).std)
+    }));
     rows.push(row("% features".into(), &|s| pct(s.fraction.mean)));
     rows.push(row(parameter.into(), &|s| {
         s.setting.parameter().map_or("–".into(), format_parameter)
@@ -88,7 +101,7 @@ pub fn markdown(report: &Report) -> String {
         d.with_match,
         report.vocabulary.words,
         c.runs,
-        format!("{:.0}", d.mean_features),
+        d.mean_features.round(),
         report.stages.total_s,
         report.stages.extract_s,
         report.stages.vocabulary_s,
@@ -169,9 +182,9 @@ fn warmup_section(report: &Report) -> String {
     if c.warmups.len() < 2 {
         return String::new();
     }
-    let mut s = format!(
+    let mut s = String::from(
         "### Warm-up\n\nThe calibrated rules, re-calibrated at each warm-up (features voted \
-         before the rule is consulted) for the same target fractions.\n\n"
+         before the rule is consulted) for the same target fractions.\n\n",
     );
     for rule in &c.rules {
         let by_target = |w: usize, t: f64| {
@@ -201,6 +214,9 @@ fn warmup_section(report: &Report) -> String {
                     .chain(c.targets.iter().map(|&t| cell(t, f)))
                     .collect::<Vec<_>>()
             };
+            rows.push(row("parameter", &|x| {
+                x.setting.parameter().map_or("–".into(), format_parameter)
+            }));
             rows.push(row("% features", &|x| pct(x.fraction.mean)));
             rows.push(row("recall top-5 @90%P", &|x| pct(x.recall90_at(5).mean)));
             rows.push(row("recall@1", &|x| pct(x.recall_at_1.mean)));
@@ -228,10 +244,9 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
                     .abs()
                     .total_cmp(&(b.fraction.mean - 0.5).abs())
             })
+            && !picked.iter().any(|p| std::ptr::eq(*p, x))
         {
-            if !picked.iter().any(|p| std::ptr::eq(*p, x)) {
-                picked.push(x);
-            }
+            picked.push(x);
         }
     }
     let header: Vec<String> = [
@@ -240,6 +255,7 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
         "extract",
         "quantize",
         "vote",
+        "quantize + vote",
         "total",
     ]
     .map(String::from)
@@ -253,6 +269,7 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
                 ms(x.time_ms.extract),
                 ms(x.time_ms.quantize),
                 ms(x.time_ms.vote),
+                ms(x.time_ms.search),
                 ms(x.time_ms.total),
             ]
         })
@@ -288,7 +305,7 @@ pub fn write_csv(report: &Report, path: &Path) -> anyhow::Result<()> {
         header.push(format!("{name}_mean"));
         header.push(format!("{name}_std"));
     }
-    for stage in ["extract", "quantize", "vote", "total"] {
+    for stage in ["extract", "quantize", "vote", "search", "total"] {
         header.push(format!("{stage}_ms_median"));
         header.push(format!("{stage}_ms_p95"));
     }
@@ -313,7 +330,7 @@ pub fn write_csv(report: &Report, path: &Path) -> anyhow::Result<()> {
             r.push(format!("{:.6}", st.std));
         }
         let t = &s.time_ms;
-        for q in [t.extract, t.quantize, t.vote, t.total] {
+        for q in [t.extract, t.quantize, t.vote, t.search, t.total] {
             r.push(format!("{:.4}", q.median));
             r.push(format!("{:.4}", q.p95));
         }
