@@ -148,7 +148,15 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
     let log = eval(
         &out2,
         &cache,
-        &["--runs", "1", "--rules", "fixed", "--no-plots"],
+        &[
+            "--runs",
+            "1",
+            "--rules",
+            "fixed",
+            "--set",
+            "relative=2.5@100",
+            "--no-plots",
+        ],
     );
     assert!(log.contains("descriptors from cache"), "{log}");
     assert!(log.contains("vocabulary from cache"), "{log}");
@@ -157,6 +165,13 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
     let again: Value =
         serde_json::from_slice(&std::fs::read(out2.join("results.json")).unwrap()).unwrap();
     assert_eq!(again["vocabulary"]["hash"], report["vocabulary"]["hash"]);
-    assert_eq!(again["settings"].as_array().unwrap().len(), 4);
+    // Full search, three fixed fractions and the setting asked for.
+    let settings = again["settings"].as_array().unwrap();
+    assert_eq!(settings.len(), 5);
+    let asked = &settings[again["explicit"][0].as_u64().unwrap() as usize];
+    assert_eq!(asked["setting"]["rule"]["name"], "relative");
+    assert_eq!(asked["setting"]["min_features"], 100);
+    let md = std::fs::read_to_string(out2.join("results.md")).unwrap();
+    assert!(md.contains("### Settings asked for") && md.contains("relative 2.5 w=100"));
     assert!(!out2.join("recall_vs_features.png").exists());
 }

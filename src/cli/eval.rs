@@ -20,6 +20,9 @@ pub struct EvalArgs {
     /// Rules to sweep, comma-separated (default: all); the full search is always run.
     #[arg(long, value_delimiter = ',')]
     rules: Vec<String>,
+    /// Extra settings to run, RULE=VALUE or RULE=VALUE@WARMUP (repeatable).
+    #[arg(long = "set", value_name = "RULE=VALUE[@WARMUP]")]
+    set: Vec<String>,
     /// Warm-ups (min_features) for the calibrated rules; the first is used for the main tables.
     #[arg(long, value_delimiter = ',', default_values_t = [0usize, 20, 100])]
     min_features: Vec<usize>,
@@ -63,6 +66,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         seed: a.seed,
         runs: a.runs,
         rules: a.rules,
+        explicit: a.set,
         warmups: a.min_features,
         targets: a.targets,
         tolerance: a.tolerance,

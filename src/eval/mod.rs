@@ -54,6 +54,9 @@ pub struct EvalConfig {
     pub runs: u32,
     /// Rules to sweep (empty: all of [`RULE_GRIDS`]); the full search is always in.
     pub rules: Vec<String>,
+    /// Extra settings, `RULE=VALUE[@WARMUP]` (see [`sweep::parse_setting`]),
+    /// run besides the grids and listed in a table of their own.
+    pub explicit: Vec<String>,
     /// Warm-ups (`min_features`); the first is the main one.
     pub warmups: Vec<usize>,
     /// Calibration targets (mean fraction of features used).
@@ -144,6 +147,8 @@ pub struct Report {
     pub stages: Stages,
     pub calibrations: Vec<Calibration>,
     pub settings: Vec<SettingSummary>,
+    /// Indices into `settings` of the settings asked for explicitly.
+    pub explicit: Vec<usize>,
     pub recommendation: Option<Recommendation>,
     pub histogram: Option<HistogramInfo>,
 }
@@ -276,9 +281,21 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         (calibrated * config.warmups.len() * config.targets.len()) as u64,
         "calibrating grids",
     );
-    let (settings, calibrations) =
+    let (mut settings, calibrations) =
         sweep::plan(&map, &words, &grids, &config.warmups, &config.targets, &bar)?;
     bar.finish_and_clear();
+    let mut explicit = Vec::with_capacity(config.explicit.len());
+    for spec in &config.explicit {
+        let setting = sweep::parse_setting(spec, config.warmups[0])?;
+        let index = settings
+            .iter()
+            .position(|s| s.rule == setting.rule && s.min_features == setting.min_features)
+            .unwrap_or_else(|| {
+                settings.push(setting);
+                settings.len() - 1
+            });
+        explicit.push(index);
+    }
     stages.calibrate_s = seconds_since(&mut clock);
     tracing::info!(
         settings = settings.len(),
@@ -349,6 +366,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         stages,
         calibrations,
         settings: summaries,
+        explicit,
         recommendation,
         histogram,
     };

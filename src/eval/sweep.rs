@@ -120,6 +120,36 @@ impl Setting {
     }
 }
 
+/// A setting written `RULE=VALUE` or `RULE=VALUE@WARMUP` (warm-up
+/// `warmup` when not given), or `RULE` for a rule without a parameter.
+pub fn parse_setting(spec: &str, warmup: usize) -> anyhow::Result<Setting> {
+    let (body, min_features) = match spec.split_once('@') {
+        Some((b, w)) => (
+            b,
+            w.trim()
+                .parse()
+                .map_err(|e| anyhow::anyhow!("`{spec}`: warm-up: {e}"))?,
+        ),
+        None => (spec, warmup),
+    };
+    let (name, value) = match body.split_once('=') {
+        Some((n, v)) => (
+            n.trim(),
+            Some(
+                v.trim()
+                    .parse::<f64>()
+                    .map_err(|e| anyhow::anyhow!("`{spec}`: value: {e}"))?,
+            ),
+        ),
+        None => (body.trim(), None),
+    };
+    Ok(Setting {
+        rule: RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?,
+        min_features,
+        target: None,
+    })
+}
+
 /// A parameter value as tables show it (up to 3 significant digits).
 pub fn format_parameter(p: f64) -> String {
     let s = format!("{}", round_significant(p, 3));
@@ -408,6 +438,22 @@ mod tests {
             }
         }
         assert!(rule_grid(BASELINE).is_some());
+    }
+
+    #[test]
+    fn settings_parse_from_text() {
+        let s = parse_setting("relative=2.5@100", 0).unwrap();
+        assert_eq!(
+            (s.rule.name.as_str(), s.rule.parameter, s.min_features),
+            ("relative", 2.5, 100)
+        );
+        let s = parse_setting("peak-mean=0.01", 20).unwrap();
+        assert_eq!((s.rule.parameter, s.min_features), (0.01, 20));
+        assert_eq!(parse_setting("none", 3).unwrap().label(), "none w=3");
+        assert!(parse_setting("peak-mean", 0).is_err());
+        assert!(parse_setting("nope=1", 0).is_err());
+        assert!(parse_setting("fixed=0.5@x", 0).is_err());
+        assert!(parse_setting("fixed=2", 0).is_err());
     }
 
     #[test]

@@ -75,9 +75,10 @@ fn paper_rows(columns: &[&SettingSummary], parameter: &str) -> Vec<Vec<String>> 
     }));
     rows.push(row("recall@1".into(), &|s| pct(s.recall_at_1.mean)));
     rows.push(row("recall@5".into(), &|s| pct(s.recall_at_5.mean)));
-    rows.push(row("ms/query, median / p95".into(), &|s| {
-        ms(s.time_ms.total)
-    }));
+    rows.push(row(
+        "search ms (quantize + vote), median / p95".into(),
+        &|s| ms(s.time_ms.search),
+    ));
     rows
 }
 
@@ -144,6 +145,7 @@ pub fn markdown(report: &Report) -> String {
         s += &markdown_table(&header, &paper_rows(&all, parameter));
         s += "\n";
     }
+    s += &explicit_section(report, base);
     s += &warmup_section(report);
     s += &timing_section(report, base);
     if let Some(r) = &report.recommendation {
@@ -174,6 +176,29 @@ pub fn markdown(report: &Report) -> String {
         );
     }
     s
+}
+
+/// The settings asked for with `--set`, next to the full search.
+fn explicit_section(report: &Report, base: &SettingSummary) -> String {
+    if report.explicit.is_empty() {
+        return String::new();
+    }
+    let mut columns = vec![base];
+    columns.extend(report.explicit.iter().map(|&i| &report.settings[i]));
+    let header: Vec<String> = std::iter::once(String::new())
+        .chain(columns.iter().map(|c| c.label.clone()))
+        .collect();
+    let mut rows = paper_rows(&columns, "parameter");
+    rows.insert(
+        rows.len() - 3,
+        std::iter::once("warm-up".to_owned())
+            .chain(columns.iter().map(|c| c.setting.min_features.to_string()))
+            .collect(),
+    );
+    format!(
+        "### Settings asked for\n\n{}\n",
+        markdown_table(&header, &rows)
+    )
 }
 
 /// Rules swept at several warm-ups: one table per rule, columns = targets.
