@@ -74,10 +74,7 @@ fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
                 digits.push(c);
             } else {
                 if !digits.is_empty() {
-                    out.push((
-                        std::mem::take(&mut text),
-                        digits.parse().unwrap_or(u64::MAX),
-                    ));
+                    out.push((std::mem::take(&mut text), digits.parse().unwrap_or(u64::MAX)));
                     digits.clear();
                 }
                 text.push(c);
@@ -160,10 +157,7 @@ mod tests {
     fn natural_order() {
         let mut v = vec!["Image10.jpg", "Image9.jpg", "Image100.jpg", "Image1.jpg"];
         v.sort_by(|a, b| natural_cmp(a, b));
-        assert_eq!(
-            v,
-            ["Image1.jpg", "Image9.jpg", "Image10.jpg", "Image100.jpg"]
-        );
+        assert_eq!(v, ["Image1.jpg", "Image9.jpg", "Image10.jpg", "Image100.jpg"]);
     }
 
     #[test]

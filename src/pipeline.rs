@@ -50,10 +50,7 @@ pub fn extract_all(
     what: &str,
 ) -> anyhow::Result<Vec<Option<Descriptors>>> {
     let timed = extract_all_timed(images, config, limits, strict, what)?;
-    Ok(timed
-        .into_iter()
-        .map(|e| e.map(|e| e.descriptors))
-        .collect())
+    Ok(timed.into_iter().map(|e| e.map(|e| e.descriptors)).collect())
 }
 
 /// [`extract_all`], keeping how long each image took to decode and extract.
@@ -105,10 +102,7 @@ pub fn extract_all_timed(
         }
     }
     if failed > 0 {
-        tracing::warn!(
-            "{failed} of {} images could not be read and were skipped",
-            images.len()
-        );
+        tracing::warn!("{failed} of {} images could not be read and were skipped", images.len());
     }
     if out.iter().all(Option::is_none) {
         bail!("none of the {} images could be read", images.len());
@@ -161,20 +155,10 @@ pub fn build_vocabulary(
     config: &KmeansConfig,
     strict: bool,
 ) -> anyhow::Result<Vocabulary> {
-    let all = extract_all(
-        images,
-        extract,
-        DecodeLimits::default(),
-        strict,
-        "extracting",
-    )?;
+    let all = extract_all(images, extract, DecodeLimits::default(), strict, "extracting")?;
     let parts: Vec<&Descriptors> = all.iter().flatten().collect();
     let data = stack(&parts);
-    tracing::info!(
-        descriptors = data.nrows(),
-        images = parts.len(),
-        "training vocabulary"
-    );
+    tracing::info!(descriptors = data.nrows(), images = parts.len(), "training vocabulary");
     train_vocabulary(data.view(), extract, config)
 }
 
@@ -246,13 +230,7 @@ pub fn build_map(
             tracing::warn!("{missing} map images have no row in the places file");
         }
     }
-    Ok(index_descriptors(
-        vocab,
-        &names,
-        &descriptors,
-        places,
-        map_name,
-    ))
+    Ok(index_descriptors(vocab, &names, &descriptors, places, map_name))
 }
 
 /// A loaded vocabulary and map, ready to answer queries.
@@ -314,8 +292,7 @@ impl Localizer {
         path: &Path,
         options: &SearchOptions,
     ) -> anyhow::Result<Localization> {
-        let bytes =
-            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
         self.localize(&bytes, options)
             .with_context(|| format!("{}", path.display()))
     }

@@ -10,11 +10,7 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(
-    name = "bowloc",
-    version,
-    about = "Visual place recognition with early-stopping bag-of-words search"
-)]
+#[command(name = "bowloc", version, about = "Visual place recognition with early-stopping bag-of-words search")]
 struct Cli {
     /// Log filter (e.g. `info`, `bowloc=debug`); also RUST_LOG.
     #[arg(long, global = true, default_value = "info", env = "RUST_LOG")]

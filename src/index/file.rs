@@ -95,17 +95,10 @@ pub(super) fn open(path: &Path, verify: bool) -> Result<MapIndex, StoreError> {
             || v.places.len() != meta.images
             || v.poses.len() != meta.images * meta.pose_fields.len()
         {
-            return bad(format!(
-                "per-image arrays do not hold {} images",
-                meta.images
-            ));
+            return bad(format!("per-image arrays do not hold {} images", meta.images));
         }
-        v.names
-            .validate()
-            .map_err(|e| store.invalid(format!("names: {e}")))?;
-        v.places
-            .validate()
-            .map_err(|e| store.invalid(format!("places: {e}")))?;
+        v.names.validate().map_err(|e| store.invalid(format!("names: {e}")))?;
+        v.places.validate().map_err(|e| store.invalid(format!("places: {e}")))?;
     }
     Ok(MapIndex {
         backing: Backing::Mapped(store),

@@ -88,11 +88,7 @@ pub struct ImageInfo<'a> {
     pub pose: Option<HashMap<&'a str, f64>>,
 }
 
-pub(super) fn image_info<'a>(
-    view: &MapView<'a>,
-    pose_fields: &'a [String],
-    id: u32,
-) -> ImageInfo<'a> {
+pub(super) fn image_info<'a>(view: &MapView<'a>, pose_fields: &'a [String], id: u32) -> ImageInfo<'a> {
     let i = id as usize;
     let place = Some(view.places.get(i)).filter(|p| !p.is_empty());
     let pose = if pose_fields.is_empty() {
@@ -155,11 +151,7 @@ impl Places {
                         Ok(f64::NAN)
                     } else {
                         v.parse::<f64>().with_context(|| {
-                            format!(
-                                "{}: row {}: `{v}` is not a number",
-                                path.display(),
-                                line + 2
-                            )
+                            format!("{}: row {}: `{v}` is not a number", path.display(), line + 2)
                         })
                     }
                 })

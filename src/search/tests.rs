@@ -122,7 +122,8 @@ fn same_seed_same_outcome_different_seeds_differ() {
     let b = run(7);
     assert_eq!(a.candidates, b.candidates);
     assert_eq!(a.stop, b.stop);
-    let stops: std::collections::HashSet<usize> = (0..30).map(|s| run(s).stop.at_feature).collect();
+    let stops: std::collections::HashSet<usize> =
+        (0..30).map(|s| run(s).stop.at_feature).collect();
     assert!(stops.len() > 1, "every seed stopped at the same feature");
 }
 
@@ -168,11 +169,7 @@ fn early_scores_are_unbiased_estimates_of_full_scores() {
     }
     let mean = sum / runs as f64;
     let rel = (mean - target.score as f64).abs() / target.score as f64;
-    assert!(
-        rel < 0.02,
-        "mean early score {mean} vs full {}",
-        target.score
-    );
+    assert!(rel < 0.02, "mean early score {mean} vs full {}", target.score);
 }
 
 #[test]
@@ -186,11 +183,7 @@ fn descriptor_search_equals_search_over_precomputed_words() {
     let desc = ndarray::Array2::from_shape_fn((150, dim), |_| rng.random::<f32>());
     let mut words = vec![0u32; 150];
     q.quantize(desc.view(), &mut words);
-    for rule in [
-        ("none", None),
-        ("peak-mean", Some(0.05)),
-        ("stable-peak", Some(10.0)),
-    ] {
+    for rule in [("none", None), ("peak-mean", Some(0.05)), ("stable-peak", Some(10.0))] {
         let o = opts(rule.0, rule.1, 11);
         let a = search(&q, &map, desc.view(), &o);
         let b = search_words(&map, &words, &o);

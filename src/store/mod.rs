@@ -84,9 +84,7 @@ pub enum StoreError {
         expected: &'static str,
         found: String,
     },
-    #[error(
-        "{path}: format version {found}, this build reads version {expected}; rebuild the file"
-    )]
+    #[error("{path}: format version {found}, this build reads version {expected}; rebuild the file")]
     WrongVersion {
         path: PathBuf,
         found: u32,

@@ -49,10 +49,7 @@ impl Store {
             if map.len() >= 8 && map[..8] != magic {
                 return Err(wrong_magic(path, kind, &map[..8]));
             }
-            return Err(corrupt(format!(
-                "{} bytes, shorter than a header",
-                map.len()
-            )));
+            return Err(corrupt(format!("{} bytes, shorter than a header", map.len())));
         }
         if map[..8] != magic {
             return Err(wrong_magic(path, kind, &map[..8]));
@@ -70,11 +67,7 @@ impl Store {
             .checked_mul(ENTRY_LEN)
             .and_then(|n| n.checked_add(HEADER_LEN))
             .filter(|&end| end <= map.len())
-            .ok_or_else(|| {
-                corrupt(format!(
-                    "section table of {count} entries runs past the end"
-                ))
-            })?;
+            .ok_or_else(|| corrupt(format!("section table of {count} entries runs past the end")))?;
         let table = &map[HEADER_LEN..table_end];
         if checksum(table) != u64_at(&map, 16) {
             return Err(StoreError::Checksum {

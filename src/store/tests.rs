@@ -27,14 +27,8 @@ fn round_trip() {
     assert_eq!(store.u32s("ints").unwrap(), &[7, 8, 9, 10]);
     let meta: serde_json::Value = store.json("meta").unwrap();
     assert_eq!(meta["k"], 3);
-    assert!(matches!(
-        store.u32s("floats"),
-        Err(StoreError::Invalid { .. })
-    ));
-    assert!(matches!(
-        store.f32s("nope"),
-        Err(StoreError::MissingSection { .. })
-    ));
+    assert!(matches!(store.u32s("floats"), Err(StoreError::Invalid { .. })));
+    assert!(matches!(store.f32s("nope"), Err(StoreError::MissingSection { .. })));
 }
 
 #[test]
@@ -44,10 +38,7 @@ fn wrong_magic_and_version_are_named() {
     let err = Store::open(&path, *b"BOWLOCXX", "other", 3, true).unwrap_err();
     assert!(matches!(err, StoreError::WrongMagic { .. }), "{err}");
     let err = Store::open(&path, MAGIC, "test", 4, true).unwrap_err();
-    assert!(
-        matches!(err, StoreError::WrongVersion { found: 3, .. }),
-        "{err}"
-    );
+    assert!(matches!(err, StoreError::WrongVersion { found: 3, .. }), "{err}");
     assert!(err.to_string().contains("s.bin"));
 }
 
@@ -58,10 +49,7 @@ fn every_truncation_is_an_error() {
     let full = std::fs::read(&path).unwrap();
     for len in 0..full.len() {
         std::fs::write(&path, &full[..len]).unwrap();
-        assert!(
-            open(&path).is_err(),
-            "truncated to {len} bytes was accepted"
-        );
+        assert!(open(&path).is_err(), "truncated to {len} bytes was accepted");
     }
 }
 

@@ -46,35 +46,19 @@ impl<'a> StoreWriter<'a> {
     }
 
     pub fn f32s(&mut self, name: &str, values: &'a [f32]) -> &mut Self {
-        self.push(
-            name,
-            Dtype::F32,
-            Cow::Borrowed(bytemuck::cast_slice(values)),
-        )
+        self.push(name, Dtype::F32, Cow::Borrowed(bytemuck::cast_slice(values)))
     }
 
     pub fn u32s(&mut self, name: &str, values: &'a [u32]) -> &mut Self {
-        self.push(
-            name,
-            Dtype::U32,
-            Cow::Borrowed(bytemuck::cast_slice(values)),
-        )
+        self.push(name, Dtype::U32, Cow::Borrowed(bytemuck::cast_slice(values)))
     }
 
     pub fn u64s(&mut self, name: &str, values: &'a [u64]) -> &mut Self {
-        self.push(
-            name,
-            Dtype::U64,
-            Cow::Borrowed(bytemuck::cast_slice(values)),
-        )
+        self.push(name, Dtype::U64, Cow::Borrowed(bytemuck::cast_slice(values)))
     }
 
     pub fn f64s(&mut self, name: &str, values: &'a [f64]) -> &mut Self {
-        self.push(
-            name,
-            Dtype::F64,
-            Cow::Borrowed(bytemuck::cast_slice(values)),
-        )
+        self.push(name, Dtype::F64, Cow::Borrowed(bytemuck::cast_slice(values)))
     }
 
     /// A JSON document as a bytes section.
@@ -132,8 +116,7 @@ impl<'a> StoreWriter<'a> {
         out.flush().map_err(io)?;
         drop(out);
         tmp.as_file().sync_all().map_err(io)?;
-        tmp.persist(path)
-            .map_err(|e| StoreError::io(path, e.error))?;
+        tmp.persist(path).map_err(|e| StoreError::io(path, e.error))?;
         Ok(sums)
     }
 }

@@ -53,9 +53,7 @@ pub struct KmeansReport {
 
 #[derive(Debug, thiserror::Error)]
 pub enum KmeansError {
-    #[error(
-        "cannot train {k} words from {n} descriptors: need at least as many descriptors as words"
-    )]
+    #[error("cannot train {k} words from {n} descriptors: need at least as many descriptors as words")]
     TooFewPoints { k: usize, n: usize },
     #[error("the number of words must be at least 1")]
     ZeroWords,
@@ -254,9 +252,7 @@ mod tests {
     fn blobs(seed: u64) -> Array2<f32> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let centres = [[0.0f32, 0.0], [10.0, 0.0], [0.0, 10.0]];
-        Array2::from_shape_fn((300, 2), |(i, j)| {
-            centres[i % 3][j] + rng.random::<f32>() - 0.5
-        })
+        Array2::from_shape_fn((300, 2), |(i, j)| centres[i % 3][j] + rng.random::<f32>() - 0.5)
     }
 
     #[test]
@@ -287,9 +283,7 @@ mod tests {
                 seed,
                 ..Default::default()
             };
-            kmeans(data.view(), &config, &ProgressBar::hidden())
-                .unwrap()
-                .0
+            kmeans(data.view(), &config, &ProgressBar::hidden()).unwrap().0
         };
         assert_eq!(run(1), run(1));
         assert_ne!(run(1), run(2));

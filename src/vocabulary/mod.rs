@@ -20,10 +20,7 @@ pub struct Vocabulary {
 
 enum Backing {
     Mapped(Store),
-    Owned {
-        centroids: Vec<f32>,
-        norms: Vec<f32>,
-    },
+    Owned { centroids: Vec<f32>, norms: Vec<f32> },
 }
 
 impl Vocabulary {

@@ -11,9 +11,7 @@ pub const INFO: RuleInfo = RuleInfo {
     make: |t| {
         let t = non_negative("threshold", t)?;
         if t.fract() != 0.0 {
-            return Err(format!(
-                "threshold of stable-peak counts features: a whole number, got {t}"
-            ));
+            return Err(format!("threshold of stable-peak counts features: a whole number, got {t}"));
         }
         Ok(Box::new(StablePeak {
             needed: t as usize,

@@ -93,24 +93,14 @@ fn fixed_stops_at_the_fraction() {
 #[test]
 fn none_never_stops() {
     let s = [0u32; 10];
-    assert_eq!(
-        stops_at(RuleSpec::new("none", None).unwrap(), &s, 10, 1),
-        None
-    );
+    assert_eq!(stops_at(RuleSpec::new("none", None).unwrap(), &s, 10, 1), None);
 }
 
 #[test]
 fn bad_specs_are_refused_with_reasons() {
     let err = RuleSpec::new("nope", Some(1.0)).unwrap_err();
-    assert!(
-        err.contains("unknown rule") && err.contains("peak-mean"),
-        "{err}"
-    );
-    assert!(
-        RuleSpec::new("peak-mean", None)
-            .unwrap_err()
-            .contains("threshold")
-    );
+    assert!(err.contains("unknown rule") && err.contains("peak-mean"), "{err}");
+    assert!(RuleSpec::new("peak-mean", None).unwrap_err().contains("threshold"));
     assert!(RuleSpec::new("peak-mean", Some(f64::NAN)).is_err());
     assert!(RuleSpec::new("peak-mean", Some(-1.0)).is_err());
     assert!(RuleSpec::new("hoeffding", Some(0.0)).is_err());
