@@ -91,7 +91,7 @@ impl DescriptorSet {
     }
 
     /// Per-image copies, in the form the map builder takes.
-    pub fn to_owned(&self) -> Vec<Option<Descriptors>> {
+    pub fn owned_per_image(&self) -> Vec<Option<Descriptors>> {
         (0..self.len())
             .map(|i| self.image(i).map(|d| d.to_owned()))
             .collect()
@@ -266,7 +266,7 @@ pub fn map_index(
         }
     }
     let names: Vec<String> = map.meta().images.iter().map(|i| i.name.clone()).collect();
-    let index = index_descriptors(vocab, &names, &map.to_owned(), None, name);
+    let index = index_descriptors(vocab, &names, &map.owned_per_image(), None, name);
     index.save(&path)?;
     Ok(index)
 }
@@ -310,7 +310,7 @@ mod tests {
         assert_eq!(set.image(0).unwrap().nrows(), 1);
         assert_eq!(set.image(1).unwrap()[[1, 0]], (2 * DIM) as f32);
         assert_eq!(set.extract_ms(1), 6.0);
-        assert_eq!(set.to_owned().len(), 2);
+        assert_eq!(set.owned_per_image().len(), 2);
 
         // Offsets that do not cover the rows are refused.
         StoreWriter::new(MAGIC, VERSION)

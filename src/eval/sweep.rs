@@ -276,7 +276,6 @@ fn bisect(target: f64, lo: f64, hi: f64, whole: bool, f: &dyn Fn(f64) -> f64) ->
 /// Parameters of `rule` (grid `Calibrated { lo, hi, whole }`) at warm-up
 /// `min_features` for each target fraction, rounded to 3 significant digits,
 /// from one calibration run over all queries.
-#[allow(clippy::too_many_arguments)]
 pub fn calibrate(
     map: &MapIndex,
     queries: &[Vec<u32>],
