@@ -2,7 +2,8 @@
 # Install the system packages bowloc needs on Debian bookworm (idempotent:
 # does nothing when they are already there).
 set -euo pipefail
-packages=(libopencv-dev clang libclang-dev curl jq make ca-certificates)
+# fonts-dejavu-core: the TrueType font `bowloc eval` draws its plots' text with.
+packages=(libopencv-dev clang libclang-dev curl jq make ca-certificates fonts-dejavu-core)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

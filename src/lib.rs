@@ -17,11 +17,15 @@
 //! - [`pipeline`] — glue used by every front end: extraction over image lists,
 //!   building vocabularies and maps, answering one query.
 //! - [`report`] — the answer to a query as users see it (JSON).
+//! - [`eval`] — the paper's evaluation on a dataset: descriptor cache, sweep
+//!   of rules × parameters × random orders, metrics (precision/recall
+//!   definitions), tables and plots. Drives the search on pre-quantized words.
 //!
 //! The algorithmic core (`quantize`, `vocabulary`, `index`, `search`) has no
 //! OpenCV or HTTP types; front ends (`cli`) live at the edges.
 
 pub mod dataset;
+pub mod eval;
 pub mod features;
 pub mod index;
 pub mod pipeline;

@@ -15,7 +15,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use ndarray::{Array2, ArrayView2, Axis};
 use rayon::prelude::*;
 use std::path::Path;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// A progress bar on stderr (hidden when stderr is not a terminal).
 pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
@@ -29,6 +29,16 @@ pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
     bar
 }
 
+/// One image's descriptors and what reading them cost.
+#[derive(Debug, Clone)]
+pub struct Extracted {
+    pub descriptors: Descriptors,
+    /// Reading and decoding the file.
+    pub decode: Duration,
+    /// Feature extraction on the decoded image.
+    pub extract: Duration,
+}
+
 /// Descriptors of every image, in parallel, one image per core. Images that
 /// cannot be read or decoded are `None`, each named in a warning, with a count
 /// at the end; with `strict` the first one is an error.
@@ -39,12 +49,33 @@ pub fn extract_all(
     strict: bool,
     what: &str,
 ) -> anyhow::Result<Vec<Option<Descriptors>>> {
+    let timed = extract_all_timed(images, config, limits, strict, what)?;
+    Ok(timed.into_iter().map(|e| e.map(|e| e.descriptors)).collect())
+}
+
+/// [`extract_all`], keeping how long each image took to decode and extract.
+pub fn extract_all_timed(
+    images: &[ImageRef],
+    config: &ExtractConfig,
+    limits: DecodeLimits,
+    strict: bool,
+    what: &str,
+) -> anyhow::Result<Vec<Option<Extracted>>> {
     features::set_opencv_threads(1);
     let bar = progress_bar(images.len() as u64, what);
-    let results: Vec<Result<Descriptors, FeatureError>> = images
+    let results: Vec<Result<Extracted, FeatureError>> = images
         .par_iter()
         .map(|image| {
-            let r = features::extract_file(&image.path, config, limits);
+            let started = Instant::now();
+            let r = features::decode_file(&image.path, limits).and_then(|decoded| {
+                let read = started.elapsed();
+                let descriptors = features::extract(&decoded, config)?;
+                Ok(Extracted {
+                    descriptors,
+                    decode: read,
+                    extract: started.elapsed() - read,
+                })
+            });
             bar.inc(1);
             r
         })
@@ -54,11 +85,11 @@ pub fn extract_all(
     let mut failed = 0;
     for (image, result) in images.iter().zip(results) {
         match result {
-            Ok(d) => {
-                if d.nrows() == 0 {
+            Ok(e) => {
+                if e.descriptors.nrows() == 0 {
                     tracing::warn!(image = %image.name, "no features found");
                 }
-                out.push(Some(d));
+                out.push(Some(e));
             }
             Err(e) => {
                 if strict {

@@ -1,6 +1,7 @@
 //! Command-line front end: argument parsing and one module per subcommand.
 
 mod args;
+mod eval;
 mod map;
 mod query;
 mod vocab;
@@ -32,6 +33,8 @@ enum Command {
     Map(map::MapCommand),
     /// Localize images against a map and print the results as JSON.
     Query(query::QueryArgs),
+    /// Evaluate the stopping rules on a dataset (the paper's tables and plots).
+    Eval(Box<eval::EvalArgs>),
 }
 
 pub fn run() -> ExitCode {
@@ -47,6 +50,7 @@ pub fn run() -> ExitCode {
         Command::Vocab(c) => vocab::run(c),
         Command::Map(c) => map::run(c),
         Command::Query(a) => query::run(a),
+        Command::Eval(a) => eval::run(*a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

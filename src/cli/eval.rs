@@ -1,0 +1,106 @@
+//! `bowloc eval`: reproduce the paper's evaluation on a dataset in the shared
+//! layout (tables, CSV, JSON and plots in `--out`).
+
+use super::args::ExtractArgs;
+use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct EvalArgs {
+    /// Dataset folder (map.txt, queries.txt, ground_truth.csv).
+    #[arg(long)]
+    dataset: PathBuf,
+    /// Vocabulary size K (trained on the map images, cached).
+    #[arg(long, default_value_t = 1000)]
+    words: usize,
+    /// Monte Carlo runs (random feature orders) to average over.
+    #[arg(long, default_value_t = 10)]
+    runs: u32,
+    /// Rules to sweep, comma-separated (default: all); the full search is always run.
+    #[arg(long, value_delimiter = ',')]
+    rules: Vec<String>,
+    /// Extra settings to run, RULE=VALUE or RULE=VALUE@WARMUP (repeatable).
+    #[arg(long = "set", value_name = "RULE=VALUE[@WARMUP]")]
+    set: Vec<String>,
+    /// Warm-ups (min_features) for the calibrated rules; the first is used for the main tables.
+    #[arg(long, value_delimiter = ',', default_values_t = [0usize, 20, 100])]
+    min_features: Vec<usize>,
+    /// Mean fractions of features the calibrated grids aim at.
+    #[arg(long, value_delimiter = ',', default_values_t = DEFAULT_TARGETS.to_vec())]
+    targets: Vec<f64>,
+    /// Recall (absolute) the recommended setting may lose against the full search.
+    #[arg(long, default_value_t = 0.02)]
+    tolerance: f64,
+    /// Setting of the histogram figure: RULE or RULE=VALUE (default: the recommended one).
+    #[arg(long)]
+    histogram: Option<String>,
+    /// k-means seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Use this vocabulary instead of training one (its extraction settings are used).
+    #[arg(long)]
+    vocab: Option<PathBuf>,
+    /// Output folder (default data/eval/<dataset>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Cache folder (default data/eval-cache/<dataset>).
+    #[arg(long)]
+    cache: Option<PathBuf>,
+    /// Skip the PNG/SVG figures.
+    #[arg(long)]
+    no_plots: bool,
+    #[command(flatten)]
+    extract: ExtractArgs,
+}
+
+pub fn run(a: EvalArgs) -> anyhow::Result<()> {
+    let name = a
+        .dataset
+        .canonicalize()
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "dataset".into());
+    let config = EvalConfig {
+        words: a.words,
+        seed: a.seed,
+        runs: a.runs,
+        rules: a.rules,
+        explicit: a.set,
+        warmups: a.min_features,
+        targets: a.targets,
+        tolerance: a.tolerance,
+        histogram: a.histogram,
+        extract: a.extract.config(),
+        vocab: a.vocab,
+        out: a
+            .out
+            .unwrap_or_else(|| PathBuf::from("data/eval").join(&name)),
+        cache: a
+            .cache
+            .unwrap_or_else(|| PathBuf::from("data/eval-cache").join(&name)),
+        plots: !a.no_plots,
+        command: std::env::args().collect::<Vec<_>>().join(" "),
+        dataset: a.dataset,
+    };
+    let report = eval::run(&config)?;
+    tracing::info!(
+        out = %config.out.display(),
+        settings = report.settings.len(),
+        seconds = format!("{:.1}", report.stages.total_s),
+        "evaluation written"
+    );
+    if let Some(r) = &report.recommendation {
+        println!(
+            "recommended: {} ({:.1} % of features, recall top-5 @90%P {:.1} % vs {:.1} %, recall@1 {:.1} % vs {:.1} %)",
+            r.label,
+            100.0 * r.fraction,
+            100.0 * r.recall90_top5,
+            100.0 * r.baseline_recall90_top5,
+            100.0 * r.recall_at_1,
+            100.0 * r.baseline_recall_at_1
+        );
+    }
+    println!("{}", config.out.join("results.md").display());
+    Ok(())
+}

@@ -1,0 +1,366 @@
+//! The evaluation's disk cache (by default `data/eval-cache/<dataset>/`): the
+//! descriptors of an image list, the vocabulary trained on the map's
+//! descriptors and the map built from them, so a second run (other rules,
+//! other runs) skips extraction, k-means and indexing.
+//!
+//! Descriptor files are store files (magic `BOWLOCDE`) with three sections:
+//! `meta` (JSON: the extraction settings, each image's name and file size,
+//! whether it was readable, and how long it took to decode and extract),
+//! `descriptors` (f32, all rows stacked, 128 wide) and `offsets` (u64, image i
+//! owns rows `offsets[i]..offsets[i + 1]`). A file made with other settings or
+//! other images is rebuilt, not reused. Vocabulary and map file names carry
+//! the checksum of the descriptors they come from, so they cannot go stale.
+
+use crate::dataset::ImageRef;
+use crate::features::{DecodeLimits, Descriptors, ExtractConfig};
+use crate::index::MapIndex;
+use crate::pipeline::{extract_all_timed, index_descriptors, train_vocabulary};
+use crate::store::{Store, StoreWriter};
+use crate::vocabulary::Vocabulary;
+use crate::vocabulary::kmeans::KmeansConfig;
+use anyhow::Context;
+use ndarray::ArrayView2;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+const MAGIC: [u8; 8] = *b"BOWLOCDE";
+const VERSION: u32 = 1;
+/// Descriptor width (SIFT).
+const DIM: usize = 128;
+
+/// An input image as the cache knows it: a changed name or size invalidates.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ImageStamp {
+    pub name: String,
+    pub bytes: u64,
+}
+
+/// What a descriptor file holds and how it was made.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct DescriptorMeta {
+    pub extract: ExtractConfig,
+    pub images: Vec<ImageStamp>,
+    /// False for images that could not be read (they have no rows).
+    pub readable: Vec<bool>,
+    /// Per image: reading and decoding the file, in milliseconds.
+    pub decode_ms: Vec<f64>,
+    /// Per image: feature extraction on the decoded image, in milliseconds.
+    pub extract_ms: Vec<f64>,
+}
+
+/// The descriptors of an image list, memory-mapped from the cache.
+pub struct DescriptorSet {
+    store: Store,
+    meta: DescriptorMeta,
+}
+
+impl DescriptorSet {
+    pub fn meta(&self) -> &DescriptorMeta {
+        &self.meta
+    }
+
+    /// Number of images.
+    pub fn len(&self) -> usize {
+        self.meta.images.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    fn offsets(&self) -> &[u64] {
+        self.store.u64s("offsets").expect("validated on open")
+    }
+
+    /// Every image's rows, stacked.
+    pub fn all(&self) -> ArrayView2<'_, f32> {
+        let data = self.store.f32s("descriptors").expect("validated on open");
+        ArrayView2::from_shape((data.len() / DIM, DIM), data).expect("validated on open")
+    }
+
+    /// The rows of image `i` (`None`: the image could not be read).
+    pub fn image(&self, i: usize) -> Option<ArrayView2<'_, f32>> {
+        if !self.meta.readable[i] {
+            return None;
+        }
+        let o = self.offsets();
+        Some(
+            self.all()
+                .slice_move(ndarray::s![o[i] as usize..o[i + 1] as usize, ..]),
+        )
+    }
+
+    /// Per-image copies, in the form the map builder takes.
+    pub fn owned_per_image(&self) -> Vec<Option<Descriptors>> {
+        (0..self.len())
+            .map(|i| self.image(i).map(|d| d.to_owned()))
+            .collect()
+    }
+
+    /// Decode plus extraction time of image `i`, in milliseconds.
+    pub fn extract_ms(&self, i: usize) -> f64 {
+        self.meta.decode_ms[i] + self.meta.extract_ms[i]
+    }
+
+    /// Checksum of the descriptors: names the files derived from them.
+    pub fn hash(&self) -> u64 {
+        self.store
+            .section("descriptors")
+            .expect("validated on open")
+            .checksum
+    }
+}
+
+fn stamps(images: &[ImageRef]) -> anyhow::Result<Vec<ImageStamp>> {
+    images
+        .iter()
+        .map(|i| {
+            let bytes = std::fs::metadata(&i.path)
+                .with_context(|| format!("{}: cannot read", i.path.display()))?
+                .len();
+            Ok(ImageStamp {
+                name: i.name.clone(),
+                bytes,
+            })
+        })
+        .collect()
+}
+
+/// Open a descriptor file and check its structure.
+fn open(path: &Path) -> anyhow::Result<DescriptorSet> {
+    let store = Store::open(path, MAGIC, "descriptor cache", VERSION, true)?;
+    let meta: DescriptorMeta = store.json("meta")?;
+    let n = meta.images.len();
+    let offsets = store.u64s("offsets")?;
+    let rows = store.f32s("descriptors")?.len() / DIM;
+    let consistent = offsets.len() == n + 1
+        && offsets.first() == Some(&0)
+        && offsets.last() == Some(&(rows as u64))
+        && offsets.windows(2).all(|w| w[0] <= w[1])
+        && store.f32s("descriptors")?.len() % DIM == 0
+        && [
+            meta.readable.len(),
+            meta.decode_ms.len(),
+            meta.extract_ms.len(),
+        ] == [n; 3];
+    if !consistent {
+        return Err(store
+            .invalid("offsets, rows and image list disagree")
+            .into());
+    }
+    Ok(DescriptorSet { store, meta })
+}
+
+/// The descriptors of `images` extracted with `config`: from `path` when it
+/// holds exactly those, else extracted (in parallel, timed) and written there.
+pub fn descriptors(
+    path: &Path,
+    images: &[ImageRef],
+    config: &ExtractConfig,
+    what: &str,
+) -> anyhow::Result<DescriptorSet> {
+    let stamps = stamps(images)?;
+    if path.exists() {
+        match open(path) {
+            Ok(set) if set.meta.extract == *config && set.meta.images == stamps => {
+                tracing::info!(path = %path.display(), images = set.len(), "descriptors from cache");
+                return Ok(set);
+            }
+            Ok(_) => {
+                tracing::info!(path = %path.display(), "cache made from other images or settings: re-extracting")
+            }
+            Err(e) => tracing::warn!("unusable cache, re-extracting: {e:#}"),
+        }
+    }
+    let extracted = extract_all_timed(images, config, DecodeLimits::default(), false, what)?;
+    let mut data: Vec<f32> = Vec::new();
+    let mut offsets = vec![0u64];
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    let mut meta = DescriptorMeta {
+        extract: config.clone(),
+        images: stamps,
+        readable: Vec::with_capacity(images.len()),
+        decode_ms: Vec::with_capacity(images.len()),
+        extract_ms: Vec::with_capacity(images.len()),
+    };
+    for e in &extracted {
+        if let Some(e) = e {
+            anyhow::ensure!(
+                e.descriptors.ncols() == DIM,
+                "descriptors are not {DIM} wide"
+            );
+            data.extend(e.descriptors.iter());
+        }
+        offsets.push((data.len() / DIM) as u64);
+        meta.readable.push(e.is_some());
+        meta.decode_ms
+            .push(e.as_ref().map_or(0.0, |e| ms(e.decode)));
+        meta.extract_ms
+            .push(e.as_ref().map_or(0.0, |e| ms(e.extract)));
+    }
+    StoreWriter::new(MAGIC, VERSION)
+        .json("meta", &meta)
+        .f32s("descriptors", &data)
+        .u64s("offsets", &offsets)
+        .write_atomic(path)?;
+    tracing::info!(path = %path.display(), rows = offsets.last(), "descriptors cached");
+    open(path)
+}
+
+/// A vocabulary of `config.k` words trained on `map`'s descriptors, cached in
+/// `dir` under a name holding K, the seed and the descriptors' checksum.
+pub fn vocabulary(
+    dir: &Path,
+    map: &DescriptorSet,
+    config: &KmeansConfig,
+) -> anyhow::Result<Vocabulary> {
+    let path = dir.join(format!(
+        "vocab-k{}-seed{}-{:016x}.bowvoc",
+        config.k,
+        config.seed,
+        map.hash()
+    ));
+    if path.exists() {
+        match Vocabulary::open(&path, true) {
+            Ok(v) if v.words() == config.k && v.meta().extract == map.meta().extract => {
+                tracing::info!(path = %path.display(), "vocabulary from cache");
+                return Ok(v);
+            }
+            Ok(_) => {
+                tracing::warn!(path = %path.display(), "cached vocabulary does not fit: retraining")
+            }
+            Err(e) => tracing::warn!("unusable cached vocabulary, retraining: {e:#}"),
+        }
+    }
+    tracing::info!(
+        descriptors = map.all().nrows(),
+        words = config.k,
+        "training vocabulary"
+    );
+    let vocab = train_vocabulary(map.all(), &map.meta().extract, config)?;
+    vocab.save(&path)?;
+    Ok(vocab)
+}
+
+/// The map of `map`'s images over `vocab`, cached in `dir` under a name
+/// holding the vocabulary's hash and the descriptors' checksum.
+pub fn map_index(
+    dir: &Path,
+    vocab: &Vocabulary,
+    map: &DescriptorSet,
+    name: &str,
+) -> anyhow::Result<MapIndex> {
+    let path = dir.join(format!(
+        "map-{}-{:016x}.bowmap",
+        vocab.hash_hex(),
+        map.hash()
+    ));
+    if path.exists() {
+        match MapIndex::open_for(&path, vocab, true) {
+            Ok(m) if m.images() == map.len() => {
+                tracing::info!(path = %path.display(), "map from cache");
+                return Ok(m);
+            }
+            Ok(_) => tracing::warn!(path = %path.display(), "cached map does not fit: rebuilding"),
+            Err(e) => tracing::warn!("unusable cached map, rebuilding: {e:#}"),
+        }
+    }
+    let names: Vec<String> = map.meta().images.iter().map(|i| i.name.clone()).collect();
+    let index = index_descriptors(vocab, &names, &map.owned_per_image(), None, name);
+    index.save(&path)?;
+    Ok(index)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A hand-made cache file opens with its rows in place; one whose offsets
+    /// disagree with its rows is refused.
+    #[test]
+    fn descriptor_files_open_and_are_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("d.bowdesc");
+        let meta = DescriptorMeta {
+            extract: ExtractConfig::default(),
+            images: vec![
+                ImageStamp {
+                    name: "a".into(),
+                    bytes: 1,
+                },
+                ImageStamp {
+                    name: "b".into(),
+                    bytes: 2,
+                },
+            ],
+            readable: vec![true, true],
+            decode_ms: vec![1.0, 2.0],
+            extract_ms: vec![3.0, 4.0],
+        };
+        let data: Vec<f32> = (0..3 * DIM).map(|v| v as f32).collect();
+        StoreWriter::new(MAGIC, VERSION)
+            .json("meta", &meta)
+            .f32s("descriptors", &data)
+            .u64s("offsets", &[0, 1, 3])
+            .write_atomic(&path)
+            .unwrap();
+        let set = open(&path).unwrap();
+        assert_eq!(set.len(), 2);
+        assert_eq!(set.all().nrows(), 3);
+        assert_eq!(set.image(0).unwrap().nrows(), 1);
+        assert_eq!(set.image(1).unwrap()[[1, 0]], (2 * DIM) as f32);
+        assert_eq!(set.extract_ms(1), 6.0);
+        assert_eq!(set.owned_per_image().len(), 2);
+
+        // Offsets that do not cover the rows are refused.
+        StoreWriter::new(MAGIC, VERSION)
+            .json("meta", &meta)
+            .f32s("descriptors", &data)
+            .u64s("offsets", &[0, 1, 2])
+            .write_atomic(&path)
+            .unwrap();
+        assert!(open(&path).is_err());
+    }
+
+    #[test]
+    fn stale_caches_are_rebuilt() {
+        let dir = tempfile::tempdir().unwrap();
+        // An unreadable "image": extracting it fails, so an error proves the
+        // cache was not used and a success proves it was.
+        std::fs::write(dir.path().join("x.jpg"), b"not an image").unwrap();
+        let images = vec![ImageRef {
+            name: "x.jpg".into(),
+            path: dir.path().join("x.jpg"),
+        }];
+        let path = dir.path().join("d.bowdesc");
+        let meta = DescriptorMeta {
+            extract: ExtractConfig::default(),
+            images: stamps(&images).unwrap(),
+            readable: vec![true],
+            decode_ms: vec![0.0],
+            extract_ms: vec![0.0],
+        };
+        let data = vec![0.5f32; DIM];
+        let write = |meta: &DescriptorMeta| {
+            StoreWriter::new(MAGIC, VERSION)
+                .json("meta", meta)
+                .f32s("descriptors", &data)
+                .u64s("offsets", &[0, 1])
+                .write_atomic(&path)
+                .unwrap();
+        };
+        write(&meta);
+        // Same images and settings: served from the file.
+        let set = descriptors(&path, &images, &ExtractConfig::default(), "t").unwrap();
+        assert_eq!(set.all().nrows(), 1);
+        // Other settings: re-extracted, which fails on the fake image.
+        let other = ExtractConfig {
+            max_side: 320,
+            ..ExtractConfig::default()
+        };
+        assert!(descriptors(&path, &images, &other, "t").is_err());
+        // Same settings but the image changed size: re-extracted too.
+        std::fs::write(dir.path().join("x.jpg"), b"still not an image").unwrap();
+        assert!(descriptors(&path, &images, &ExtractConfig::default(), "t").is_err());
+    }
+}

@@ -1,0 +1,188 @@
+//! The numbers of one setting: the metrics of each Monte Carlo run (recall at
+//! 90 % precision is computed per run, then averaged over runs), their mean
+//! and spread, the fraction of features used and the per-stage time of a
+//! query. Tables, CSV, JSON and plots all read these.
+
+use super::metrics::{self, Answer};
+use super::sweep::{Outcome, Setting};
+use super::timing::{self, StageSample, StageTimes};
+use serde::Serialize;
+use std::collections::HashSet;
+
+/// Candidate list lengths of the paper's tables (recall top-n at 90 % P).
+pub const TOP_N: [usize; 3] = [3, 5, 10];
+/// The precision the tables' recall is read at.
+pub const PRECISION: f64 = 0.9;
+
+/// Mean and sample standard deviation over runs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Stat {
+    pub mean: f64,
+    pub std: f64,
+}
+
+impl Stat {
+    pub fn of(values: &[f64]) -> Self {
+        Self {
+            mean: metrics::mean(values),
+            std: metrics::std_dev(values),
+        }
+    }
+}
+
+/// The metrics of one run.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunMetrics {
+    /// Recall at 90 % precision for each n of [`TOP_N`].
+    pub recall90: [f64; 3],
+    /// The score cut giving it.
+    pub cut90: [Option<f32>; 3],
+    pub recall_at_1: f64,
+    pub recall_at_5: f64,
+    /// Mean over queries of the fraction of features used.
+    pub fraction: f64,
+}
+
+/// What the evaluation needs to know about each query besides its answers.
+#[derive(Debug, Clone, Copy)]
+pub struct QueryCost {
+    /// Decode + extract time, in milliseconds.
+    pub extract_ms: f64,
+    /// Quantization time per feature, in milliseconds.
+    pub quantize_ms_per_feature: f64,
+}
+
+/// Everything reported for one setting.
+#[derive(Debug, Clone, Serialize)]
+pub struct SettingSummary {
+    pub setting: Setting,
+    pub label: String,
+    /// Recall at 90 % precision for each n of [`TOP_N`], over runs.
+    pub recall90: [Stat; 3],
+    pub recall_at_1: Stat,
+    pub recall_at_5: Stat,
+    pub fraction: Stat,
+    /// Per-query stage times over all queries and runs, in milliseconds.
+    pub time_ms: StageTimes,
+    pub runs: Vec<RunMetrics>,
+}
+
+impl SettingSummary {
+    /// Recall at 90 % precision with `n` candidates (n from [`TOP_N`]).
+    pub fn recall90_at(&self, n: usize) -> Stat {
+        let i = TOP_N
+            .iter()
+            .position(|&t| t == n)
+            .expect("n is one of TOP_N");
+        self.recall90[i]
+    }
+}
+
+/// The metrics of one run's answers.
+pub fn run_metrics(outcomes: &[Outcome], truth: &[HashSet<u32>]) -> RunMetrics {
+    let answers: Vec<Answer<'_>> = outcomes
+        .iter()
+        .zip(truth)
+        .map(|(o, t)| Answer {
+            candidates: &o.candidates,
+            truth: t,
+        })
+        .collect();
+    let at = TOP_N.map(|n| metrics::recall_at_precision(&answers, n, PRECISION));
+    let fractions: Vec<f64> = outcomes.iter().map(Outcome::fraction).collect();
+    RunMetrics {
+        recall90: at.map(|r| r.recall),
+        cut90: at.map(|r| r.threshold),
+        recall_at_1: metrics::recall_at(&answers, 1),
+        recall_at_5: metrics::recall_at(&answers, 5),
+        fraction: metrics::mean(&fractions),
+    }
+}
+
+/// Summarise a setting from its outcomes `runs[run][query]`.
+pub fn summarize(
+    setting: &Setting,
+    runs: &[Vec<Outcome>],
+    truth: &[HashSet<u32>],
+    costs: &[QueryCost],
+) -> SettingSummary {
+    let per_run: Vec<RunMetrics> = runs.iter().map(|r| run_metrics(r, truth)).collect();
+    let over =
+        |f: &dyn Fn(&RunMetrics) -> f64| Stat::of(&per_run.iter().map(f).collect::<Vec<_>>());
+    let samples: Vec<StageSample> = runs
+        .iter()
+        .flat_map(|r| r.iter().zip(costs))
+        .map(|(o, c)| StageSample {
+            extract: c.extract_ms,
+            quantize: c.quantize_ms_per_feature * o.used as f64,
+            vote: o.vote_ms as f64,
+        })
+        .collect();
+    SettingSummary {
+        setting: setting.clone(),
+        label: setting.label(),
+        recall90: [0, 1, 2].map(|i| over(&|m| m.recall90[i])),
+        recall_at_1: over(&|m| m.recall_at_1),
+        recall_at_5: over(&|m| m.recall_at_5),
+        fraction: over(&|m| m.fraction),
+        time_ms: timing::summarize(&samples),
+        runs: per_run,
+    }
+}
+
+/// Fraction of features used by each query in each run, pooled.
+pub fn fractions(runs: &[Vec<Outcome>]) -> Vec<f64> {
+    runs.iter().flatten().map(Outcome::fraction).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::search::{Ranked, RuleSpec};
+
+    fn outcome(list: &[(u32, f32)], used: u32) -> Outcome {
+        Outcome {
+            candidates: list
+                .iter()
+                .map(|&(id, score)| Ranked { id, score })
+                .collect(),
+            used,
+            total: 100,
+            vote_ms: 1.0,
+        }
+    }
+
+    #[test]
+    fn metrics_are_computed_per_run_then_averaged() {
+        let truth: Vec<HashSet<u32>> = vec![[1].into(), [2].into()];
+        // Run 0: both right at rank 1 → recall@90%P 1. Run 1: q1 answers
+        // wrongly with the top score, so every cut that admits q0 admits q1
+        // too (precision ≤ 50 %) → recall@90%P 0.
+        let runs = vec![
+            vec![outcome(&[(1, 0.9)], 50), outcome(&[(2, 0.8)], 30)],
+            vec![outcome(&[(1, 0.5)], 100), outcome(&[(7, 0.8)], 20)],
+        ];
+        let setting = Setting {
+            rule: RuleSpec::new("none", None).unwrap(),
+            min_features: 0,
+            target: None,
+        };
+        let costs = [QueryCost {
+            extract_ms: 10.0,
+            quantize_ms_per_feature: 0.1,
+        }; 2];
+        let s = summarize(&setting, &runs, &truth, &costs);
+        assert_eq!(s.runs[0].recall90, [1.0; 3]);
+        assert_eq!(s.runs[1].recall90, [0.0; 3]);
+        assert_eq!(s.recall90_at(5).mean, 0.5);
+        assert!((s.recall90_at(5).std - 0.5f64.sqrt()).abs() < 1e-12);
+        assert_eq!(s.runs[1].recall_at_1, 0.5);
+        assert_eq!(s.recall_at_5.mean, 0.75);
+        assert_eq!(s.runs[0].fraction, 0.4);
+        assert!((s.fraction.mean - 0.5).abs() < 1e-12);
+        // Quantize time is charged per feature used: 20..100 features.
+        assert_eq!(s.time_ms.quantize.p95, 10.0);
+        assert_eq!(s.time_ms.extract.median, 10.0);
+        assert_eq!(fractions(&runs), [0.5, 0.3, 1.0, 0.2]);
+    }
+}

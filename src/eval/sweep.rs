@@ -1,0 +1,573 @@
+//! The sweep: which rules run with which parameters (one table,
+//! [`RULE_GRIDS`]: a new rule is one line there), how calibrated grids are
+//! found for a dataset, and running every setting over every Monte Carlo run
+//! and query on pre-quantized words.
+
+use crate::index::MapIndex;
+use crate::search::{Ranked, RuleSpec, SearchOptions, search_words};
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// How a rule's parameter values are chosen.
+#[derive(Debug, Clone, Copy)]
+pub enum Grid {
+    /// The rule takes no parameter: one setting.
+    Single,
+    /// Exactly these values.
+    Values(&'static [f64]),
+    /// Values found for each dataset and warm-up so that the mean fraction of
+    /// features used hits each calibration target; searched by bisection on a
+    /// log scale within `[lo, hi]` (whole numbers when `whole`). Works for any
+    /// rule whose stop point moves one way as its parameter grows.
+    Calibrated { lo: f64, hi: f64, whole: bool },
+}
+
+/// A rule and how its parameter is swept.
+#[derive(Debug, Clone, Copy)]
+pub struct RuleGrid {
+    pub rule: &'static str,
+    pub grid: Grid,
+}
+
+/// The full search every other setting is compared with.
+pub const BASELINE: &str = "none";
+
+/// Every rule the evaluation knows, with its grid. Calibrated grids are also
+/// run at every warm-up (`min_features`) asked for; the others only at the
+/// first.
+pub const RULE_GRIDS: &[RuleGrid] = &[
+    RuleGrid {
+        rule: BASELINE,
+        grid: Grid::Single,
+    },
+    RuleGrid {
+        rule: "peak-mean",
+        grid: Grid::Calibrated {
+            lo: 1e-9,
+            hi: 1e3,
+            whole: false,
+        },
+    },
+    RuleGrid {
+        rule: "relative",
+        grid: Grid::Calibrated {
+            lo: 1e-6,
+            hi: 1e6,
+            whole: false,
+        },
+    },
+    RuleGrid {
+        rule: "stable-peak",
+        grid: Grid::Calibrated {
+            lo: 1.0,
+            hi: 1e5,
+            whole: true,
+        },
+    },
+    RuleGrid {
+        rule: "hoeffding",
+        grid: Grid::Values(&[0.5, 0.25, 0.1, 0.05, 0.01]),
+    },
+    RuleGrid {
+        rule: "fixed",
+        grid: Grid::Values(&[0.3, 0.5, 0.7]),
+    },
+];
+
+/// Look a rule's grid up by name.
+pub fn rule_grid(name: &str) -> Option<&'static RuleGrid> {
+    RULE_GRIDS.iter().find(|g| g.rule == name)
+}
+
+/// One configuration of the search.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Setting {
+    pub rule: RuleSpec,
+    /// Warm-up: features voted before the rule is consulted.
+    pub min_features: usize,
+    /// The fraction of features its parameter was calibrated for, if any.
+    pub target: Option<f64>,
+}
+
+impl Setting {
+    /// The rule's parameter, for rules that take one.
+    pub fn parameter(&self) -> Option<f64> {
+        self.rule.parameter_name().map(|_| self.rule.parameter)
+    }
+
+    /// Short name, e.g. `peak-mean T=0.05 w=10`.
+    pub fn label(&self) -> String {
+        let mut s = self.rule.name.clone();
+        if let Some(p) = self.parameter() {
+            s += &format!(" {}", format_parameter(p));
+        }
+        if self.min_features > 0 {
+            s += &format!(" w={}", self.min_features);
+        }
+        s
+    }
+
+    /// Search options for one query of one run.
+    pub fn options(&self, seed: u64, top_n: usize) -> SearchOptions {
+        SearchOptions {
+            rule: self.rule.clone(),
+            top_n,
+            seed,
+            min_features: self.min_features,
+            ..SearchOptions::default()
+        }
+    }
+}
+
+/// A setting written `RULE=VALUE` or `RULE=VALUE@WARMUP` (warm-up
+/// `warmup` when not given), or `RULE` for a rule without a parameter.
+pub fn parse_setting(spec: &str, warmup: usize) -> anyhow::Result<Setting> {
+    let (body, min_features) = match spec.split_once('@') {
+        Some((b, w)) => (
+            b,
+            w.trim()
+                .parse()
+                .map_err(|e| anyhow::anyhow!("`{spec}`: warm-up: {e}"))?,
+        ),
+        None => (spec, warmup),
+    };
+    let (name, value) = match body.split_once('=') {
+        Some((n, v)) => (
+            n.trim(),
+            Some(
+                v.trim()
+                    .parse::<f64>()
+                    .map_err(|e| anyhow::anyhow!("`{spec}`: value: {e}"))?,
+            ),
+        ),
+        None => (body.trim(), None),
+    };
+    Ok(Setting {
+        rule: RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?,
+        min_features,
+        target: None,
+    })
+}
+
+/// A parameter value as tables show it (up to 3 significant digits).
+pub fn format_parameter(p: f64) -> String {
+    let s = format!("{}", round_significant(p, 3));
+    if s.len() > 9 { format!("{p:.2e}") } else { s }
+}
+
+/// `v` rounded to `digits` significant digits.
+pub fn round_significant(v: f64, digits: i32) -> f64 {
+    if v == 0.0 || !v.is_finite() {
+        return v;
+    }
+    let scale = 10f64.powi(digits - 1 - v.abs().log10().floor() as i32);
+    (v * scale).round() / scale
+}
+
+/// The run number the calibration pass uses: its permutations are not those
+/// of any evaluation run.
+pub const CALIBRATION_RUN: u32 = u32::MAX;
+
+/// Seed of the permutation of `query` in `run`: every setting of a run sees
+/// the same order for a query, so settings are compared on the same draws.
+pub fn seed(run: u32, query: usize) -> u64 {
+    ((run as u64) << 32) | query as u64
+}
+
+/// The result of one search, kept for the metrics.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub candidates: Vec<Ranked>,
+    pub used: u32,
+    pub total: u32,
+    /// Time spent voting (and checking the rule), in milliseconds.
+    pub vote_ms: f32,
+}
+
+impl Outcome {
+    /// Fraction of the query's features used (1 for a query without any).
+    pub fn fraction(&self) -> f64 {
+        if self.total == 0 {
+            1.0
+        } else {
+            self.used as f64 / self.total as f64
+        }
+    }
+}
+
+fn search_one(
+    map: &MapIndex,
+    words: &[u32],
+    setting: &Setting,
+    seed: u64,
+    top_n: usize,
+) -> Outcome {
+    let o = search_words(map, words, &setting.options(seed, top_n));
+    Outcome {
+        candidates: o.candidates,
+        used: o.features_used as u32,
+        total: o.features_total as u32,
+        vote_ms: o.timings.vote.as_secs_f32() * 1e3,
+    }
+}
+
+/// Mean fraction of features `setting` uses over all queries in `run`.
+pub fn mean_fraction(map: &MapIndex, queries: &[Vec<u32>], setting: &Setting, run: u32) -> f64 {
+    let total: f64 = queries
+        .par_iter()
+        .enumerate()
+        .map(|(q, words)| search_one(map, words, setting, seed(run, q), 1).fraction())
+        .sum();
+    total / queries.len().max(1) as f64
+}
+
+/// A calibrated parameter value.
+#[derive(Debug, Clone, Serialize)]
+pub struct Calibration {
+    pub rule: String,
+    pub min_features: usize,
+    pub target: f64,
+    pub parameter: f64,
+    /// Mean fraction it gave in the calibration run.
+    pub fraction: f64,
+}
+
+/// Stop bisecting once the fraction is this close to the target.
+const CALIBRATION_TOLERANCE: f64 = 0.005;
+/// Bisection steps at most per target.
+const CALIBRATION_STEPS: usize = 40;
+
+/// The parameter of `rule` in `[lo, hi]` whose mean fraction `f` is nearest
+/// `target`: bisection on ln(parameter), in whichever direction `f` moves.
+fn bisect(target: f64, lo: f64, hi: f64, whole: bool, f: &dyn Fn(f64) -> f64) -> (f64, f64) {
+    let (f_lo, f_hi) = (f(lo), f(hi));
+    let rising = f_hi >= f_lo;
+    let mut best = if (f_lo - target).abs() <= (f_hi - target).abs() {
+        (lo, f_lo)
+    } else {
+        (hi, f_hi)
+    };
+    let (mut a, mut b) = (lo, hi);
+    for _ in 0..CALIBRATION_STEPS {
+        if (best.1 - target).abs() <= CALIBRATION_TOLERANCE {
+            break;
+        }
+        let mut p = ((a.ln() + b.ln()) * 0.5).exp();
+        if whole {
+            p = p.round();
+            if p <= a || p >= b {
+                break;
+            }
+        }
+        let v = f(p);
+        if (v - target).abs() < (best.1 - target).abs() {
+            best = (p, v);
+        }
+        if (v < target) == rising {
+            a = p;
+        } else {
+            b = p;
+        }
+    }
+    best
+}
+
+/// Parameters of `rule` (grid `Calibrated { lo, hi, whole }`) at warm-up
+/// `min_features` for each target fraction, rounded to 3 significant digits,
+/// from one calibration run over all queries.
+pub fn calibrate(
+    map: &MapIndex,
+    queries: &[Vec<u32>],
+    rule: &str,
+    (lo, hi, whole): (f64, f64, bool),
+    min_features: usize,
+    targets: &[f64],
+    bar: &ProgressBar,
+) -> anyhow::Result<Vec<Calibration>> {
+    let setting = |p: f64| -> anyhow::Result<Setting> {
+        Ok(Setting {
+            rule: RuleSpec::new(rule, Some(p)).map_err(anyhow::Error::msg)?,
+            min_features,
+            target: None,
+        })
+    };
+    setting(lo)?;
+    setting(hi)?;
+    let memo = std::sync::Mutex::new(std::collections::HashMap::<u64, f64>::new());
+    let f = |p: f64| -> f64 {
+        if let Some(&v) = memo.lock().expect("not poisoned").get(&p.to_bits()) {
+            return v;
+        }
+        let s = setting(p).expect("within the checked range");
+        let v = mean_fraction(map, queries, &s, CALIBRATION_RUN);
+        memo.lock().expect("not poisoned").insert(p.to_bits(), v);
+        v
+    };
+    let mut out = Vec::with_capacity(targets.len());
+    for &target in targets {
+        let (p, _) = bisect(target, lo, hi, whole, &f);
+        let p = if whole { p } else { round_significant(p, 3) };
+        out.push(Calibration {
+            rule: rule.to_owned(),
+            min_features,
+            target,
+            parameter: p,
+            fraction: f(p),
+        });
+        bar.inc(1);
+    }
+    Ok(out)
+}
+
+/// Every setting to run for `grids`: single and listed values at the first
+/// warm-up, calibrated grids at every warm-up. Also returns the calibrations.
+pub fn plan(
+    map: &MapIndex,
+    queries: &[Vec<u32>],
+    grids: &[&RuleGrid],
+    warmups: &[usize],
+    targets: &[f64],
+    bar: &ProgressBar,
+) -> anyhow::Result<(Vec<Setting>, Vec<Calibration>)> {
+    let first = warmups.first().copied().unwrap_or(0);
+    let mut settings = Vec::new();
+    let mut calibrations = Vec::new();
+    let spec = |name: &str, p: Option<f64>| RuleSpec::new(name, p).map_err(anyhow::Error::msg);
+    for g in grids {
+        match g.grid {
+            Grid::Single => settings.push(Setting {
+                rule: spec(g.rule, None)?,
+                min_features: first,
+                target: None,
+            }),
+            Grid::Values(values) => {
+                for &v in values {
+                    settings.push(Setting {
+                        rule: spec(g.rule, Some(v))?,
+                        min_features: first,
+                        target: None,
+                    });
+                }
+            }
+            Grid::Calibrated { lo, hi, whole } => {
+                for &w in warmups {
+                    let found = calibrate(map, queries, g.rule, (lo, hi, whole), w, targets, bar)?;
+                    let mut seen: Vec<f64> = Vec::new();
+                    for c in &found {
+                        if seen.contains(&c.parameter) {
+                            continue;
+                        }
+                        seen.push(c.parameter);
+                        settings.push(Setting {
+                            rule: spec(g.rule, Some(c.parameter))?,
+                            min_features: w,
+                            target: Some(c.target),
+                        });
+                    }
+                    calibrations.extend(found);
+                }
+            }
+        }
+    }
+    Ok((settings, calibrations))
+}
+
+/// Run every setting on every query in every run: `result[setting][run][query]`.
+pub fn run_all(
+    map: &MapIndex,
+    queries: &[Vec<u32>],
+    settings: &[Setting],
+    runs: u32,
+    top_n: usize,
+    bar: &ProgressBar,
+) -> Vec<Vec<Vec<Outcome>>> {
+    let per_query: Vec<Vec<Outcome>> = queries
+        .par_iter()
+        .enumerate()
+        .map(|(q, words)| {
+            let mut out = Vec::with_capacity(settings.len() * runs as usize);
+            for s in settings {
+                for run in 0..runs {
+                    out.push(search_one(map, words, s, seed(run, q), top_n));
+                }
+            }
+            bar.inc(1);
+            out
+        })
+        .collect();
+    let mut result: Vec<Vec<Vec<Outcome>>> = (0..settings.len())
+        .map(|_| {
+            (0..runs)
+                .map(|_| Vec::with_capacity(queries.len()))
+                .collect()
+        })
+        .collect();
+    for outcomes in per_query {
+        for (i, o) in outcomes.into_iter().enumerate() {
+            result[i / runs as usize][i % runs as usize].push(o);
+        }
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::index::{ImageWords, MapBuilder};
+    use crate::search::stop::rule_info;
+
+    #[test]
+    fn every_grid_names_a_known_rule_with_valid_values() {
+        for g in RULE_GRIDS {
+            let info = rule_info(g.rule).unwrap_or_else(|| panic!("unknown rule {}", g.rule));
+            match g.grid {
+                Grid::Single => assert!(info.parameter.is_none(), "{}", g.rule),
+                Grid::Values(vs) => {
+                    assert!(!vs.is_empty());
+                    for &v in vs {
+                        RuleSpec::new(g.rule, Some(v)).unwrap();
+                    }
+                }
+                Grid::Calibrated { lo, hi, .. } => {
+                    assert!(lo > 0.0 && lo < hi, "{}", g.rule);
+                    RuleSpec::new(g.rule, Some(lo)).unwrap();
+                    RuleSpec::new(g.rule, Some(hi)).unwrap();
+                }
+            }
+        }
+        assert!(rule_grid(BASELINE).is_some());
+    }
+
+    #[test]
+    fn settings_parse_from_text() {
+        let s = parse_setting("relative=2.5@100", 0).unwrap();
+        assert_eq!(
+            (s.rule.name.as_str(), s.rule.parameter, s.min_features),
+            ("relative", 2.5, 100)
+        );
+        let s = parse_setting("peak-mean=0.01", 20).unwrap();
+        assert_eq!((s.rule.parameter, s.min_features), (0.01, 20));
+        assert_eq!(parse_setting("none", 3).unwrap().label(), "none w=3");
+        assert!(parse_setting("peak-mean", 0).is_err());
+        assert!(parse_setting("nope=1", 0).is_err());
+        assert!(parse_setting("fixed=0.5@x", 0).is_err());
+        assert!(parse_setting("fixed=2", 0).is_err());
+    }
+
+    #[test]
+    fn rounding_and_seeds() {
+        assert_eq!(round_significant(0.012345, 3), 0.0123);
+        assert_eq!(round_significant(98765.0, 3), 98800.0);
+        assert_eq!(format_parameter(0.05), "0.05");
+        assert_ne!(seed(0, 1), seed(1, 0));
+        assert_ne!(seed(CALIBRATION_RUN, 0), seed(0, 0));
+    }
+
+    #[test]
+    fn bisection_finds_targets_either_way() {
+        // A rising step-free function: fraction = p / 100 on [1, 100].
+        let rising = |p: f64| p / 100.0;
+        let (p, v) = bisect(0.5, 1.0, 100.0, false, &rising);
+        assert!((v - 0.5).abs() <= CALIBRATION_TOLERANCE && (p - 50.0).abs() < 1.0);
+        // Falling, with whole numbers.
+        let falling = |p: f64| 1.0 - p / 100.0;
+        let (p, v) = bisect(0.3, 1.0, 100.0, true, &falling);
+        assert_eq!(p.fract(), 0.0);
+        assert!((v - 0.3).abs() <= 0.01, "{p} {v}");
+        // Out of reach: the nearest end.
+        assert_eq!(bisect(0.0, 10.0, 100.0, false, &rising).0, 10.0);
+    }
+
+    fn toy_map() -> MapIndex {
+        let mut b = MapBuilder::new(8);
+        let images: [&[u32]; 4] = [&[0, 1, 2, 2], &[2, 3, 4], &[4, 5, 6, 6], &[6, 7, 0, 1]];
+        for (i, w) in images.iter().enumerate() {
+            b.add(ImageWords::from_words(format!("{i}"), w));
+        }
+        b.build("t", "0", None)
+    }
+
+    #[test]
+    fn fixed_fraction_uses_that_share_and_runs_are_laid_out_by_setting() {
+        let map = toy_map();
+        let queries: Vec<Vec<u32>> = (0..5)
+            .map(|q| (0..40).map(|i| ((i * 7 + q) % 8) as u32).collect())
+            .collect();
+        let settings = vec![
+            Setting {
+                rule: RuleSpec::new("none", None).unwrap(),
+                min_features: 0,
+                target: None,
+            },
+            Setting {
+                rule: RuleSpec::new("fixed", Some(0.5)).unwrap(),
+                min_features: 0,
+                target: None,
+            },
+        ];
+        let bar = ProgressBar::hidden();
+        let r = run_all(&map, &queries, &settings, 3, 2, &bar);
+        assert_eq!((r.len(), r[0].len(), r[0][0].len()), (2, 3, 5));
+        for run in &r[0] {
+            assert!(run.iter().all(|o| o.used == 40 && o.fraction() == 1.0));
+        }
+        for run in &r[1] {
+            assert!(run.iter().all(|o| o.used == 20 && o.candidates.len() <= 2));
+        }
+        assert_eq!(mean_fraction(&map, &queries, &settings[1], 0), 0.5);
+    }
+
+    #[test]
+    fn calibration_hits_reachable_targets_of_a_real_rule() {
+        let map = toy_map();
+        let queries: Vec<Vec<u32>> = (0..6)
+            .map(|q| {
+                (0..200)
+                    .map(|i| ((i * 5 + q * 3 + i / 7) % 8) as u32)
+                    .collect()
+            })
+            .collect();
+        let bar = ProgressBar::hidden();
+        // `fixed` is listed, not calibrated, but its fraction is its
+        // parameter, which makes it a checkable calibration subject.
+        let found = calibrate(
+            &map,
+            &queries,
+            "fixed",
+            (0.01, 1.0, false),
+            0,
+            &[0.3, 0.7],
+            &bar,
+        )
+        .unwrap();
+        assert_eq!(found.len(), 2);
+        for c in &found {
+            assert!(
+                (c.fraction - c.target).abs() <= CALIBRATION_TOLERANCE,
+                "{c:?}"
+            );
+            assert!((c.parameter - c.target).abs() < 0.02, "{c:?}");
+        }
+        let (settings, cal) = plan(
+            &map,
+            &queries,
+            &[
+                rule_grid("none").unwrap(),
+                rule_grid("stable-peak").unwrap(),
+            ],
+            &[0, 5],
+            &[0.5, 0.9],
+            &bar,
+        )
+        .unwrap();
+        assert_eq!(cal.len(), 4);
+        assert_eq!(settings[0].rule.name, "none");
+        assert!(
+            settings[1..]
+                .iter()
+                .all(|s| s.rule.name == "stable-peak" && s.target.is_some())
+        );
+        assert!(settings.iter().any(|s| s.min_features == 5));
+    }
+}

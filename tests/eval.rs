@@ -1,0 +1,177 @@
+//! End to end: `bowloc eval` on the real rtabmap-loop dataset with a small
+//! vocabulary and few runs, then a second run served from the cache.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn dataset() -> PathBuf {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets/rtabmap-loop");
+    assert!(
+        d.join("map.txt").is_file(),
+        "{} is missing: the shared datasets sit beside the project",
+        d.display()
+    );
+    d
+}
+
+fn eval(out: &Path, cache: &Path, extra: &[&str]) -> String {
+    let output = Command::new(env!("CARGO_BIN_EXE_bowloc"))
+        .arg("eval")
+        .arg("--dataset")
+        .arg(dataset())
+        .arg("--out")
+        .arg(out)
+        .arg("--cache")
+        .arg(cache)
+        .args(["--words", "200", "--log", "info"])
+        .args(extra)
+        .output()
+        .expect("bowloc runs");
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(output.status.success(), "bowloc eval failed:\n{stderr}");
+    stderr
+}
+
+fn mean(v: &Value) -> f64 {
+    v["mean"].as_f64().expect("a mean")
+}
+
+#[test]
+fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
+    let dir = tempfile::tempdir().unwrap();
+    let (out, cache) = (dir.path().join("out"), dir.path().join("cache"));
+    let log = eval(
+        &out,
+        &cache,
+        &[
+            "--runs",
+            "3",
+            "--min-features",
+            "0,10",
+            "--targets",
+            "0.4,0.7",
+        ],
+    );
+    assert!(log.contains("training vocabulary"), "{log}");
+
+    for f in ["results.md", "results.csv", "results.json"] {
+        assert!(out.join(f).metadata().unwrap().len() > 0, "{f}");
+    }
+    for stem in ["recall_vs_features", "warmup", "fraction_histogram"] {
+        let png = std::fs::read(out.join(format!("{stem}.png"))).unwrap();
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n", "{stem}.png");
+        let svg = std::fs::read_to_string(out.join(format!("{stem}.svg"))).unwrap();
+        assert!(
+            svg.contains("<svg") && svg.contains("features used"),
+            "{stem}.svg"
+        );
+    }
+
+    let report: Value =
+        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    assert_eq!(report["dataset"]["queries"], 44);
+    assert_eq!(report["dataset"]["with_match"], 44);
+    let settings = report["settings"].as_array().unwrap();
+    let find = |rule: &str, p: Option<f64>| {
+        settings
+            .iter()
+            .find(|s| {
+                s["setting"]["rule"]["name"] == rule
+                    && p.is_none_or(|p| s["setting"]["rule"]["parameter"].as_f64() == Some(p))
+            })
+            .unwrap_or_else(|| panic!("no setting {rule} {p:?}"))
+    };
+
+    // The full search uses every feature and finds most places (measured:
+    // recall@5 and recall top-5 @90%P 0.977 with K = 200, 3 runs).
+    let full = find("none", None);
+    assert_eq!(mean(&full["fraction"]), 1.0);
+    assert!(
+        mean(&full["recall_at_5"]) >= 0.85,
+        "{}",
+        full["recall_at_5"]
+    );
+    assert!(mean(&full["recall90"][1]) >= 0.8, "{}", full["recall90"]);
+
+    // The naive rule uses its fraction (one query without features counts 1).
+    let half = mean(&find("fixed", Some(0.5))["fraction"]);
+    assert!((0.48..=0.55).contains(&half), "fixed 0.5 used {half}");
+
+    // Calibrated rules ran at both warm-ups, and peak-mean spans the targets.
+    for w in [0, 10] {
+        assert!(
+            settings
+                .iter()
+                .any(|s| s["setting"]["rule"]["name"] == "stable-peak"
+                    && s["setting"]["min_features"] == w)
+        );
+    }
+    let peak: Vec<f64> = settings
+        .iter()
+        .filter(|s| {
+            s["setting"]["rule"]["name"] == "peak-mean" && s["setting"]["min_features"] == 0
+        })
+        .map(|s| mean(&s["fraction"]))
+        .collect();
+    assert_eq!(peak.len(), 2);
+    assert!(peak.iter().any(|&f| (0.3..0.5).contains(&f)), "{peak:?}");
+    assert!(peak.iter().any(|&f| (0.6..0.8).contains(&f)), "{peak:?}");
+
+    // Per run, recall at 90 % precision grows with n and never exceeds
+    // plain recall@5 for n = 5.
+    for s in settings {
+        for run in s["runs"].as_array().unwrap() {
+            let r: Vec<f64> = run["recall90"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect();
+            assert!(r[0] <= r[1] && r[1] <= r[2], "{run}");
+            assert!(
+                r[1] <= run["recall_at_5"].as_f64().unwrap() + 1e-12,
+                "{run}"
+            );
+        }
+        assert_eq!(s["runs"].as_array().unwrap().len(), 3);
+    }
+
+    // One CSV row per setting.
+    let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    assert_eq!(csv.lines().count(), settings.len() + 1);
+    let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert!(md.contains("recall top-5 @90%P") && md.contains("### Rule `peak-mean`"));
+
+    // A second run with other rules reuses descriptors, vocabulary and map.
+    let out2 = dir.path().join("out2");
+    let log = eval(
+        &out2,
+        &cache,
+        &[
+            "--runs",
+            "1",
+            "--rules",
+            "fixed",
+            "--set",
+            "relative=2.5@100",
+            "--no-plots",
+        ],
+    );
+    assert!(log.contains("descriptors from cache"), "{log}");
+    assert!(log.contains("vocabulary from cache"), "{log}");
+    assert!(log.contains("map from cache"), "{log}");
+    assert!(!log.contains("training vocabulary"), "{log}");
+    let again: Value =
+        serde_json::from_slice(&std::fs::read(out2.join("results.json")).unwrap()).unwrap();
+    assert_eq!(again["vocabulary"]["hash"], report["vocabulary"]["hash"]);
+    // Full search, three fixed fractions and the setting asked for.
+    let settings = again["settings"].as_array().unwrap();
+    assert_eq!(settings.len(), 5);
+    let asked = &settings[again["explicit"][0].as_u64().unwrap() as usize];
+    assert_eq!(asked["setting"]["rule"]["name"], "relative");
+    assert_eq!(asked["setting"]["min_features"], 100);
+    let md = std::fs::read_to_string(out2.join("results.md")).unwrap();
+    assert!(md.contains("### Settings asked for") && md.contains("relative 2.5 w=100"));
+    assert!(!out2.join("recall_vs_features.png").exists());
+}
