@@ -50,7 +50,10 @@ pub fn extract_all(
     what: &str,
 ) -> anyhow::Result<Vec<Option<Descriptors>>> {
     let timed = extract_all_timed(images, config, limits, strict, what)?;
-    Ok(timed.into_iter().map(|e| e.map(|e| e.descriptors)).collect())
+    Ok(timed
+        .into_iter()
+        .map(|e| e.map(|e| e.descriptors))
+        .collect())
 }
 
 /// [`extract_all`], keeping how long each image took to decode and extract.

@@ -73,6 +73,14 @@ pub const RULE_GRIDS: &[RuleGrid] = &[
         rule: "fixed",
         grid: Grid::Values(&[0.3, 0.5, 0.7]),
     },
+    RuleGrid {
+        rule: "lossless",
+        grid: Grid::Single,
+    },
+    RuleGrid {
+        rule: "confident",
+        grid: Grid::Values(&[0.1, 0.05, 0.01]),
+    },
 ];
 
 /// Look a rule's grid up by name.
