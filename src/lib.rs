@@ -16,6 +16,8 @@
 //! - [`dataset`] — the shared dataset layout (image lists, ground truth).
 //! - [`pipeline`] — glue used by every front end: extraction over image lists,
 //!   building vocabularies and maps, answering one query.
+//! - [`calibrate`] — choosing a rule's parameter for a map without ground
+//!   truth, from pseudo-queries made of the map's own images.
 //! - [`report`] — the answer to a query as users see it (JSON).
 //! - [`eval`] — the paper's evaluation on a dataset: descriptor cache, sweep
 //!   of rules × parameters × random orders, metrics (precision/recall
@@ -24,6 +26,7 @@
 //! The algorithmic core (`quantize`, `vocabulary`, `index`, `search`) has no
 //! OpenCV or HTTP types; front ends (`cli`) live at the edges.
 
+pub mod calibrate;
 pub mod dataset;
 pub mod eval;
 pub mod features;

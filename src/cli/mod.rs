@@ -1,6 +1,7 @@
 //! Command-line front end: argument parsing and one module per subcommand.
 
 mod args;
+mod calibrate;
 mod eval;
 mod map;
 mod query;
@@ -35,6 +36,8 @@ enum Command {
     Query(query::QueryArgs),
     /// Evaluate the stopping rules on a dataset (the paper's tables and plots).
     Eval(Box<eval::EvalArgs>),
+    /// Choose stopping-rule parameters for a map without ground truth.
+    Calibrate(calibrate::CalibrateArgs),
 }
 
 pub fn run() -> ExitCode {
@@ -51,6 +54,7 @@ pub fn run() -> ExitCode {
         Command::Map(c) => map::run(c),
         Command::Query(a) => query::run(a),
         Command::Eval(a) => eval::run(*a),
+        Command::Calibrate(a) => calibrate::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -83,6 +83,18 @@ pub const RULE_GRIDS: &[RuleGrid] = &[
     },
 ];
 
+/// Range searched when calibrating a rule's parameter: the calibrated grid's
+/// range, or δ ∈ [10⁻⁹, 0.5] for the confidence rules.
+pub fn parameter_range(rule: &str) -> Option<(f64, f64, bool)> {
+    match rule_grid(rule)?.grid {
+        Grid::Calibrated { lo, hi, whole } => Some((lo, hi, whole)),
+        _ if RuleSpec::new(rule, None).is_err() && RuleSpec::new(rule, Some(0.5)).is_ok() => {
+            Some((1e-9, 0.5, false))
+        }
+        _ => None,
+    }
+}
+
 /// Look a rule's grid up by name.
 pub fn rule_grid(name: &str) -> Option<&'static RuleGrid> {
     RULE_GRIDS.iter().find(|g| g.rule == name)
@@ -204,7 +216,7 @@ impl Outcome {
     }
 }
 
-fn search_one(
+pub fn search_one(
     map: &MapIndex,
     words: &[u32],
     setting: &Setting,
@@ -279,6 +291,41 @@ fn bisect(target: f64, lo: f64, hi: f64, whole: bool, f: &dyn Fn(f64) -> f64) ->
         }
     }
     best
+}
+
+/// The most aggressive parameter between a `conservative` and an
+/// `aggressive` end at which `ok` still holds, for an `ok` that changes at
+/// most once along the range: `aggressive` itself if `ok` holds there, `None`
+/// if it fails even at `conservative`, else the edge found by bisection on
+/// ln(parameter) (whole numbers when `whole`).
+pub fn bisect_edge(
+    conservative: f64,
+    aggressive: f64,
+    whole: bool,
+    ok: &dyn Fn(f64) -> bool,
+) -> Option<f64> {
+    if ok(aggressive) {
+        return Some(aggressive);
+    }
+    if !ok(conservative) {
+        return None;
+    }
+    let (mut good, mut bad) = (conservative, aggressive);
+    for _ in 0..CALIBRATION_STEPS {
+        let mut p = ((good.ln() + bad.ln()) * 0.5).exp();
+        if whole {
+            p = p.round();
+        }
+        if p == good || p == bad || (good - bad).abs() / good.abs().max(bad.abs()) < 1e-3 {
+            break;
+        }
+        if ok(p) {
+            good = p;
+        } else {
+            bad = p;
+        }
+    }
+    Some(good)
 }
 
 /// Parameters of `rule` (grid `Calibrated { lo, hi, whole }`) at warm-up

@@ -173,6 +173,20 @@ mod tests {
     use super::*;
 
     #[test]
+    fn image_words_are_recovered_from_the_postings() {
+        let mut b = MapBuilder::new(5);
+        b.add(ImageWords::from_words("a", &[0, 0, 1, 2, 2, 2]));
+        b.add(ImageWords::from_words("b", &[1, 3]));
+        b.add(ImageWords::from_words("c", &[3, 4, 4]));
+        let map = b.build("t", "0", None);
+        let mut got = map.image_words();
+        for g in &mut got {
+            g.sort_unstable();
+        }
+        assert_eq!(got, vec![vec![0, 0, 1, 2, 2, 2], vec![1, 3], vec![3, 4, 4]]);
+    }
+
+    #[test]
     fn counts_are_run_lengths() {
         let iw = ImageWords::from_words("a", &[3, 1, 3, 3, 0]);
         assert_eq!(iw.counts, vec![(0, 1), (1, 1), (3, 3)]);

@@ -99,6 +99,38 @@ impl MapIndex {
         metadata::image_info(&view, &self.meta.pose_fields, id)
     }
 
+    /// Each image's words, recovered from the postings: d̂_j(w) ∝ count_j(w)·idf(w),
+    /// so count_j(w) ∝ d̂_j(w)/idf(w), scaled so the rarest word counts once.
+    /// Words of idf 0 (present in every image) leave no posting and are
+    /// missing, as they cast no vote anyway.
+    pub fn image_words(&self) -> Vec<Vec<u32>> {
+        let v = self.view();
+        let mut ratios: Vec<Vec<(u32, f32)>> = vec![Vec::new(); self.images()];
+        for w in 0..self.words() as u32 {
+            let idf = v.idf[w as usize];
+            let (ids, weights) = v.postings.list(w);
+            for (&j, &d) in ids.iter().zip(weights) {
+                if let Some(r) = ratios.get_mut(j as usize)
+                    && idf > 0.0
+                {
+                    r.push((w, d / idf));
+                }
+            }
+        }
+        ratios
+            .into_iter()
+            .map(|r| {
+                let unit = r.iter().map(|e| e.1).fold(f32::INFINITY, f32::min);
+                r.iter()
+                    .flat_map(|&(w, x)| {
+                        let count = (x / unit).round().max(1.0) as usize;
+                        std::iter::repeat_n(w, count)
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
     /// Open a map file. With `verify`, every checksum is recomputed.
     pub fn open(path: &std::path::Path, verify: bool) -> Result<Self, StoreError> {
         file::open(path, verify)

@@ -1,0 +1,178 @@
+//! Calibration without ground truth: choose, for one map, the parameter of
+//! each stopping rule at which the early answer disagrees with full
+//! bag-of-words' top-1 on at most a given fraction of pseudo-queries.
+//!
+//! The pseudo-queries come from the map itself. Each image's words are
+//! recovered from the postings ([`MapIndex::image_words`]). The images with
+//! even ids form a calibration map and those with odd ids become queries
+//! against it, each with a random 30 % of its features dropped. A query's
+//! neighbours along a route are then in the map but the query itself is not,
+//! as with real queries. The parameter is found by bisection with the eval's
+//! grids (`eval::sweep`).
+
+use crate::eval::sweep::{
+    Setting, bisect_edge, parameter_range, round_significant, search_one, seed,
+};
+use crate::index::{ImageWords, MapBuilder, MapIndex};
+use crate::search::RuleSpec;
+use anyhow::Context;
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// Share of each pseudo-query's features that is dropped.
+const DROP: f64 = 0.3;
+
+/// A calibration map and its pseudo-queries.
+pub struct PseudoQueries {
+    pub map: MapIndex,
+    pub queries: Vec<Vec<u32>>,
+}
+
+/// Split `map` into a calibration map (even ids) and perturbed pseudo-queries
+/// (odd ids).
+pub fn pseudo_queries(map: &MapIndex, seed: u64) -> PseudoQueries {
+    let words = map.image_words();
+    let mut builder = MapBuilder::new(map.words());
+    let mut queries = Vec::new();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    for (j, mut w) in words.into_iter().enumerate() {
+        if j % 2 == 0 {
+            builder.add(ImageWords::from_words(map.image(j as u32).name, &w));
+        } else {
+            w.shuffle(&mut rng);
+            w.truncate(((1.0 - DROP) * w.len() as f64).round() as usize);
+            queries.push(w);
+        }
+    }
+    PseudoQueries {
+        map: builder.build("calibration", &map.meta().vocab_hash, None),
+        queries,
+    }
+}
+
+/// The calibrated parameter of one rule.
+#[derive(Debug, Clone, Serialize)]
+pub struct Calibrated {
+    pub rule: String,
+    pub parameter: f64,
+    pub min_features: usize,
+    /// Disagreement with full top-1 on the pseudo-queries.
+    pub disagreement: f64,
+    /// Mean fraction of features used on the pseudo-queries.
+    pub fraction: f64,
+}
+
+/// Disagreement with the full top-1 and mean fraction used, over `runs`
+/// permutations of every query.
+pub fn measure(
+    map: &MapIndex,
+    queries: &[Vec<u32>],
+    full_top1: &[Option<u32>],
+    setting: &Setting,
+    runs: u32,
+) -> (f64, f64) {
+    let (disagree, fraction, n) = (0..runs)
+        .into_par_iter()
+        .flat_map(|run| (0..queries.len()).into_par_iter().map(move |q| (run, q)))
+        .filter(|&(_, q)| full_top1[q].is_some())
+        .map(|(run, q)| {
+            let o = search_one(map, &queries[q], setting, seed(run, q), 1);
+            let top = o.candidates.first().map(|c| c.id);
+            ((top != full_top1[q]) as usize, o.fraction(), 1usize)
+        })
+        .reduce(|| (0, 0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+    let n = n.max(1) as f64;
+    (disagree as f64 / n, fraction / n)
+}
+
+/// Full bag-of-words' top-1 of every query.
+pub fn full_top1(map: &MapIndex, queries: &[Vec<u32>]) -> Vec<Option<u32>> {
+    let none = Setting {
+        rule: RuleSpec::new("none", None).expect("built in"),
+        min_features: 0,
+        target: None,
+    };
+    queries
+        .par_iter()
+        .map(|w| {
+            search_one(map, w, &none, 0, 1)
+                .candidates
+                .first()
+                .map(|c| c.id)
+        })
+        .collect()
+}
+
+/// The most aggressive parameter of `rule` whose disagreement is at most
+/// `max_disagreement`.
+pub fn calibrate_rule(
+    pseudo: &PseudoQueries,
+    full: &[Option<u32>],
+    rule: &str,
+    min_features: usize,
+    max_disagreement: f64,
+    runs: u32,
+) -> anyhow::Result<Option<Calibrated>> {
+    let (lo, hi, whole) = parameter_range(rule)
+        .with_context(|| format!("rule `{rule}` has no parameter to calibrate"))?;
+    let setting = |p: f64| Setting {
+        rule: RuleSpec::new(rule, Some(p)).expect("within the rule's range"),
+        min_features,
+        target: None,
+    };
+    let run = |p: f64| measure(&pseudo.map, &pseudo.queries, full, &setting(p), runs);
+    // the aggressive end is the one using fewer features
+    let (conservative, aggressive) = if run(lo).1 < run(hi).1 {
+        (hi, lo)
+    } else {
+        (lo, hi)
+    };
+    let ok = |p: f64| run(p).0 <= max_disagreement;
+    let Some(p) = bisect_edge(conservative, aggressive, whole, &ok) else {
+        return Ok(None);
+    };
+    // three significant digits, unless rounding crosses the edge
+    let rounded = if whole { p } else { round_significant(p, 3) };
+    let p = if ok(rounded) { rounded } else { p };
+    let (disagreement, fraction) = measure(&pseudo.map, &pseudo.queries, full, &setting(p), runs);
+    Ok(Some(Calibrated {
+        rule: rule.to_owned(),
+        parameter: p,
+        min_features,
+        disagreement,
+        fraction,
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::sweep::bisect_edge;
+
+    #[test]
+    fn bisect_edge_finds_the_boundary_from_either_side() {
+        // thresholds: high is conservative
+        let up = bisect_edge(1e3, 1e-3, false, &|p| p >= 2.0).unwrap();
+        assert!((2.0..2.01).contains(&up), "{up}");
+        // confidence δ: low is conservative
+        let down = bisect_edge(1e-3, 1e3, false, &|p| p <= 5.0).unwrap();
+        assert!((4.99..=5.0).contains(&down), "{down}");
+        assert_eq!(bisect_edge(100.0, 1.0, true, &|p| p >= 37.0), Some(37.0));
+        assert_eq!(bisect_edge(1.0, 10.0, false, &|_| false), None);
+        assert_eq!(bisect_edge(100.0, 1.0, false, &|_| true), Some(1.0));
+    }
+
+    #[test]
+    fn pseudo_queries_split_the_map() {
+        let map = crate::index::synthetic::zipf_map(21, 300, 50, 4);
+        let p = pseudo_queries(&map, 1);
+        assert_eq!(p.map.images(), 11);
+        assert_eq!(p.queries.len(), 10);
+        // about 70 % of each image's (voting) features remain
+        let words = map.image_words();
+        assert!((p.queries[0].len() as f64 - 0.7 * words[1].len() as f64).abs() <= 1.0);
+    }
+}
