@@ -17,9 +17,11 @@
 //! - [`pipeline`] — glue used by every front end: extraction over image lists,
 //!   building vocabularies and maps, answering one query.
 //! - [`report`] — the answer to a query as users see it (JSON).
+//! - [`server`] — the HTTP service (`bowloc serve`): routes, configuration,
+//!   bounded worker pool, metrics, OpenAPI document, protobuf answers.
 //!
 //! The algorithmic core (`quantize`, `vocabulary`, `index`, `search`) has no
-//! OpenCV or HTTP types; front ends (`cli`) live at the edges.
+//! OpenCV or HTTP types; front ends (`cli`, `server`) live at the edges.
 
 pub mod dataset;
 pub mod features;
@@ -28,5 +30,6 @@ pub mod pipeline;
 pub mod quantize;
 pub mod report;
 pub mod search;
+pub mod server;
 pub mod store;
 pub mod vocabulary;

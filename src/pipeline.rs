@@ -207,6 +207,9 @@ pub struct Localizer {
     pub vocab: Vocabulary,
     pub map: MapIndex,
     pub limits: DecodeLimits,
+    /// How queries are extracted: the vocabulary's settings, which a front end
+    /// may tighten (e.g. cap `sift.max_features`).
+    pub extract: ExtractConfig,
 }
 
 impl Localizer {
@@ -215,6 +218,7 @@ impl Localizer {
         let vocab_file = Vocabulary::open(vocab, verify)?;
         let map = MapIndex::open_for(map, &vocab_file, verify)?;
         Ok(Self {
+            extract: vocab_file.meta().extract.clone(),
             vocab: vocab_file,
             map,
             limits: DecodeLimits::default(),
@@ -230,7 +234,7 @@ impl Localizer {
         let started = Instant::now();
         let image = features::decode(bytes, self.limits)?;
         let decoded = Instant::now();
-        let descriptors = features::extract(&image, &self.vocab.meta().extract)?;
+        let descriptors = features::extract(&image, &self.extract)?;
         let edge = EdgeTimings {
             decode: decoded - started,
             extract: decoded.elapsed(),
