@@ -22,9 +22,11 @@
 //! - [`eval`] — the paper's evaluation on a dataset: descriptor cache, sweep
 //!   of rules × parameters × random orders, metrics (precision/recall
 //!   definitions), tables and plots. Drives the search on pre-quantized words.
+//! - [`server`] — the HTTP service (`bowloc serve`): routes, configuration,
+//!   bounded worker pool, metrics, OpenAPI document, protobuf answers.
 //!
 //! The algorithmic core (`quantize`, `vocabulary`, `index`, `search`) has no
-//! OpenCV or HTTP types; front ends (`cli`) live at the edges.
+//! OpenCV or HTTP types; front ends (`cli`, `server`) live at the edges.
 
 pub mod calibrate;
 pub mod dataset;
@@ -35,5 +37,6 @@ pub mod pipeline;
 pub mod quantize;
 pub mod report;
 pub mod search;
+pub mod server;
 pub mod store;
 pub mod vocabulary;

@@ -261,6 +261,9 @@ pub struct Localizer {
     pub map: MapIndex,
     pub limits: DecodeLimits,
     pub quantizer: QuantizerKind,
+    /// How queries are extracted: the vocabulary's settings, which a front end
+    /// may tighten (e.g. cap `sift.max_features`).
+    pub extract: ExtractConfig,
 }
 
 impl Localizer {
@@ -269,6 +272,7 @@ impl Localizer {
         let vocab_file = Vocabulary::open(vocab, verify)?;
         let map = MapIndex::open_for(map, &vocab_file, verify)?;
         Ok(Self {
+            extract: vocab_file.meta().extract.clone(),
             vocab: vocab_file,
             map,
             limits: DecodeLimits::default(),
@@ -285,7 +289,7 @@ impl Localizer {
         let started = Instant::now();
         let image = features::decode(bytes, self.limits)?;
         let decoded = Instant::now();
-        let descriptors = features::extract(&image, &self.vocab.meta().extract)?;
+        let descriptors = features::extract(&image, &self.extract)?;
         let edge = EdgeTimings {
             decode: decoded - started,
             extract: decoded.elapsed(),

@@ -1,15 +1,23 @@
 //! The answer to one query as users see it, shared by `bowloc query` and the
 //! HTTP service: candidates with their map metadata, how many features were
-//! used and why the search stopped, and where the time went.
+//! used and why the search stopped, and where the time went. The types also
+//! describe themselves as OpenAPI schemas (utoipa) for the service's API
+//! document.
 
 use crate::index::{ImageInfo, MapIndex};
 use crate::search::{RuleSpec, SearchOutcome, StopInfo};
 use serde::Serialize;
 use std::collections::HashMap;
 use std::time::Duration;
+use utoipa::ToSchema;
+use utoipa::openapi::RefOr;
+use utoipa::openapi::schema::{ObjectBuilder, Schema, Type};
 
-#[derive(Debug, Clone, Serialize)]
+/// The answer to one query.
+#[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Localization {
+    /// Best map images first (at most `top_n`); empty when the image has no
+    /// features.
     pub candidates: Vec<Candidate>,
     pub features: FeatureUse,
     pub rule: RuleReport,
@@ -17,36 +25,48 @@ pub struct Localization {
     /// Seed of the feature permutation (repeat it to reproduce the answer).
     pub seed: u64,
     pub image: ImageSize,
+    /// Milliseconds per stage.
     pub timings_ms: Timings,
     pub map: MapIdentity,
 }
 
-#[derive(Debug, Clone, Serialize)]
+/// One map image proposed as the query's place.
+#[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Candidate {
+    /// 1 for the best.
     pub rank: usize,
+    /// Map image id (its line in the map's image list, from 0).
     pub id: u32,
     pub name: String,
     /// Estimated full bag-of-words tf-idf score (comparable across queries).
     pub score: f32,
+    /// Place label, when the map has one for this image.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub place: Option<String>,
+    /// Pose fields, when the map has them for this image.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose: Option<HashMap<String, f64>>,
 }
 
-#[derive(Debug, Clone, Copy, Serialize)]
+/// How many of the query's features the search used.
+#[derive(Debug, Clone, Copy, Serialize, ToSchema)]
 pub struct FeatureUse {
+    /// Features extracted from the query.
     pub total: usize,
+    /// Features quantized and voted before the search stopped.
     pub used: usize,
+    /// used / total (1 when the image has no features).
     pub fraction: f64,
 }
 
-#[derive(Debug, Clone, Serialize)]
+/// The stopping rule the search ran with.
+#[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct RuleReport {
     pub name: String,
     /// What the parameter is (`threshold`, `delta`, ...), absent for `none`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub parameter: Option<&'static str>,
+    /// The parameter's value, absent for `none`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub value: Option<f64>,
 }
@@ -62,14 +82,15 @@ impl From<&RuleSpec> for RuleReport {
     }
 }
 
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+/// Size of the decoded query image in pixels.
+#[derive(Debug, Clone, Copy, Default, Serialize, ToSchema)]
 pub struct ImageSize {
     pub width: u32,
     pub height: u32,
 }
 
 /// Milliseconds per stage.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize, ToSchema)]
 pub struct Timings {
     pub decode: f64,
     pub extract: f64,
@@ -82,11 +103,15 @@ pub fn ms(d: Duration) -> f64 {
     d.as_secs_f64() * 1e3
 }
 
-#[derive(Debug, Clone, Serialize)]
+/// Which map answered.
+#[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct MapIdentity {
     pub name: String,
+    /// Images in the map.
     pub images: usize,
+    /// Visual words of its vocabulary.
     pub words: usize,
+    /// Hash of the vocabulary the map was built with.
     pub vocabulary: String,
 }
 
@@ -159,6 +184,76 @@ impl Localization {
                 total: ms(edge.decode + edge.extract + t.quantize + t.vote),
             },
             map: MapIdentity::of(map),
+        }
+    }
+}
+
+/// [`StopInfo`] lives in the search core, which knows nothing of API
+/// documents; its schema is written out here (a test checks it against the
+/// serialized form).
+impl utoipa::PartialSchema for StopInfo {
+    fn schema() -> RefOr<Schema> {
+        let text = |description: &str| {
+            ObjectBuilder::new()
+                .schema_type(Type::String)
+                .description(Some(description))
+        };
+        ObjectBuilder::new()
+            .description(Some("Where and why the search stopped."))
+            .property(
+                "kind",
+                text("`rule`: the stopping rule fired; `exhausted`: every feature was used; `deadline`: the request's deadline passed (the answer so far).")
+                    .enum_values(Some(["rule", "exhausted", "deadline"])),
+            )
+            .required("kind")
+            .property(
+                "at_feature",
+                ObjectBuilder::new()
+                    .schema_type(Type::Integer)
+                    .minimum(Some(0))
+                    .description(Some("Features voted when the search stopped.")),
+            )
+            .required("at_feature")
+            .property("detail", text("Why, for people."))
+            .required("detail")
+            .into()
+    }
+}
+
+impl ToSchema for StopInfo {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::search::StopKind;
+    use utoipa::PartialSchema;
+
+    fn object(schema: RefOr<Schema>) -> utoipa::openapi::schema::Object {
+        match schema {
+            RefOr::T(Schema::Object(o)) => o,
+            _ => panic!("object schema expected"),
+        }
+    }
+
+    #[test]
+    fn stop_schema_matches_its_serialized_form() {
+        let schema = object(StopInfo::schema());
+        let mut documented: Vec<&String> = schema.properties.keys().collect();
+        documented.sort();
+        let kinds: Vec<serde_json::Value> = object(schema.properties["kind"].clone())
+            .enum_values
+            .unwrap();
+        for kind in [StopKind::Rule, StopKind::Exhausted, StopKind::Deadline] {
+            let value = serde_json::to_value(StopInfo {
+                kind,
+                at_feature: 3,
+                detail: String::new(),
+            })
+            .unwrap();
+            let mut keys: Vec<&String> = value.as_object().unwrap().keys().collect();
+            keys.sort();
+            assert_eq!(keys, documented);
+            assert!(kinds.contains(&value["kind"]), "{}", value["kind"]);
         }
     }
 }

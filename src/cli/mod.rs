@@ -3,11 +3,15 @@
 mod args;
 mod calibrate;
 mod eval;
+mod healthcheck;
 mod map;
 mod query;
+mod serve;
 mod vocab;
 
-use clap::{Parser, Subcommand};
+use bowloc::server::config::LogFormat;
+use clap::{Parser, Subcommand, ValueEnum};
+use std::io::IsTerminal;
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -38,23 +42,63 @@ enum Command {
     Eval(Box<eval::EvalArgs>),
     /// Choose stopping-rule parameters for a map without ground truth.
     Calibrate(calibrate::CalibrateArgs),
+    /// Serve localization over HTTP (see config/default.toml).
+    Serve(serve::ServeArgs),
+    /// Print the HTTP API's OpenAPI document (as in docs/openapi.json).
+    Openapi,
+    /// Exit 0 when a running service's /healthz answers 200.
+    Healthcheck(healthcheck::HealthcheckArgs),
+}
+
+/// `--log-format` values.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum LogFormatArg {
+    Human,
+    Json,
+}
+
+impl From<LogFormatArg> for LogFormat {
+    fn from(f: LogFormatArg) -> Self {
+        match f {
+            LogFormatArg::Human => LogFormat::Human,
+            LogFormatArg::Json => LogFormat::Json,
+        }
+    }
+}
+
+/// Log to stderr, as text (coloured on a terminal) or as JSON lines.
+fn init_logging(filter: &str, format: LogFormat) {
+    let filter = tracing_subscriber::EnvFilter::try_new(filter)
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    match format {
+        LogFormat::Human => builder.with_ansi(std::io::stderr().is_terminal()).init(),
+        LogFormat::Json => builder.json().flatten_event(true).init(),
+    }
 }
 
 pub fn run() -> ExitCode {
     let cli = Cli::parse();
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_new(&cli.log)
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
     let result = match cli.command {
-        Command::Vocab(c) => vocab::run(c),
-        Command::Map(c) => map::run(c),
-        Command::Query(a) => query::run(a),
-        Command::Eval(a) => eval::run(*a),
-        Command::Calibrate(a) => calibrate::run(a),
+        Command::Serve(a) => serve::config(&a).and_then(|config| {
+            init_logging(&cli.log, config.server.log_format);
+            serve::run(config)
+        }),
+        command => {
+            init_logging(&cli.log, LogFormat::Human);
+            match command {
+                Command::Vocab(c) => vocab::run(c),
+                Command::Map(c) => map::run(c),
+                Command::Query(a) => query::run(a),
+                Command::Eval(a) => eval::run(*a),
+                Command::Calibrate(a) => calibrate::run(a),
+                Command::Openapi => serve::print_openapi(),
+                Command::Healthcheck(a) => healthcheck::run(a),
+                Command::Serve(_) => unreachable!("handled above"),
+            }
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

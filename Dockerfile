@@ -1,0 +1,42 @@
+# bowloc service image: build on Debian bookworm with Debian's OpenCV 4.6,
+# run on bookworm-slim with only the OpenCV runtime libraries the binary
+# links (scripts/check-docker-runtime.sh checks this list against `ldd`).
+#
+#   docker build -t bowloc .
+#   docker run -p 8080:8080 -v /path/to/maps:/data bowloc \
+#     serve --vocab /data/vocab.bowvoc --map /data/map.bowmap
+#
+# The image holds no map: mount one (as above), or mount a dataset folder at
+# /datasets/gardens-point to let the service bootstrap one into /data/default.
+
+FROM rust:1.88-bookworm AS build
+RUN apt-get update \
+ && apt-get install -y --no-install-recommends libopencv-dev clang libclang-dev \
+ && rm -rf /var/lib/apt/lists/*
+WORKDIR /src
+COPY . .
+RUN cargo build --release --locked --bin bowloc \
+ && cp target/release/bowloc /usr/local/bin/bowloc
+
+FROM debian:bookworm-slim AS runtime
+RUN apt-get update \
+ && apt-get install -y --no-install-recommends libopencv-core406 libopencv-imgproc406 libopencv-imgcodecs406 libopencv-features2d406 libopencv-flann406 \
+ && rm -rf /var/lib/apt/lists/* \
+ && useradd --system --uid 10001 --home-dir /srv/bowloc --create-home bowloc \
+ && mkdir -p /data && chown bowloc /data
+COPY --from=build /usr/local/bin/bowloc /usr/local/bin/bowloc
+COPY config/default.toml /etc/bowloc/config.toml
+WORKDIR /srv/bowloc
+USER bowloc
+# Inside the container listen on every interface; files and bootstrap under /data.
+ENV BOWLOC_SERVER__LISTEN=0.0.0.0:8080 \
+    BOWLOC_SERVER__LOG_FORMAT=json \
+    BOWLOC_FILES__VOCABULARY=/data/default/vocab.bowvoc \
+    BOWLOC_FILES__MAP=/data/default/map.bowmap \
+    BOWLOC_BOOTSTRAP__DATASET=/datasets/gardens-point
+EXPOSE 8080
+HEALTHCHECK --interval=15s --timeout=5s --start-period=10m --retries=3 \
+  CMD ["bowloc", "healthcheck", "--address", "127.0.0.1:8080"]
+STOPSIGNAL SIGTERM
+ENTRYPOINT ["bowloc"]
+CMD ["serve", "--config", "/etc/bowloc/config.toml"]

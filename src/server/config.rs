@@ -1,0 +1,433 @@
+//! The service's configuration: its shape and built-in defaults (which
+//! `config/default.toml` documents key by key), loading it from the TOML file
+//! and `BOWLOC_` environment variables with figment, and checking every value
+//! before start-up goes on. Command-line flags are applied by the caller with
+//! [`Config::apply`].
+
+use crate::search::{RuleSpec, SearchOptions};
+use figment::Figment;
+use figment::providers::{Env, Format, Serialized, Toml};
+use serde::{Deserialize, Serialize};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Environment variables with this prefix override keys: `BOWLOC_SEARCH__TOP_N=3`
+/// sets `search.top_n` (`__` separates a section from its key).
+pub const ENV_PREFIX: &str = "BOWLOC_";
+
+/// Everything `bowloc serve` reads at start-up.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    pub server: ServerConfig,
+    pub files: FilesConfig,
+    pub search: SearchDefaults,
+    pub limits: Limits,
+    pub bootstrap: BootstrapConfig,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ServerConfig {
+    /// Address and port to listen on.
+    pub listen: SocketAddr,
+    /// Threads doing CPU work (decode, SIFT, quantize, vote); 0 = one per core.
+    pub workers: usize,
+    pub log_format: LogFormat,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LogFormat {
+    Human,
+    Json,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FilesConfig {
+    pub vocabulary: PathBuf,
+    pub map: PathBuf,
+    /// Recompute every checksum when loading.
+    pub verify: bool,
+}
+
+/// Search settings used when a request does not give them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SearchDefaults {
+    pub rule: String,
+    /// Parameter of `rule` (threshold, delta or fraction), when it takes one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub threshold: Option<f64>,
+    pub top_n: usize,
+    pub min_features: usize,
+    pub block: usize,
+    pub min_score: f32,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Limits {
+    /// Largest request body.
+    pub body_bytes: usize,
+    /// Largest image (width × height), checked from the header before decoding.
+    pub pixels: u64,
+    /// Keep at most this many strongest features of a query (0 = all).
+    pub max_features: u32,
+    /// Largest `top_n` a request may ask for.
+    pub max_top_n: usize,
+    /// Requests that may wait for a worker; beyond that the answer is 503.
+    pub queue: usize,
+    /// Time a request may take, queueing included.
+    pub deadline_ms: u64,
+}
+
+/// Building a default vocabulary and map from a dataset when the configured
+/// files are missing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BootstrapConfig {
+    pub enabled: bool,
+    /// A dataset folder in the shared layout (its `map.txt` is used).
+    pub dataset: PathBuf,
+    /// Visual words K.
+    pub words: usize,
+    /// k-means seed.
+    pub seed: u64,
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        Self {
+            listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
+            workers: 0,
+            log_format: LogFormat::Human,
+        }
+    }
+}
+
+impl Default for FilesConfig {
+    fn default() -> Self {
+        Self {
+            vocabulary: PathBuf::from("data/default/vocab.bowvoc"),
+            map: PathBuf::from("data/default/map.bowmap"),
+            verify: true,
+        }
+    }
+}
+
+impl Default for SearchDefaults {
+    fn default() -> Self {
+        let o = SearchOptions::default();
+        Self {
+            rule: o.rule.name,
+            threshold: None,
+            top_n: o.top_n,
+            min_features: o.min_features,
+            block: o.block,
+            min_score: o.min_score,
+        }
+    }
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            body_bytes: 10 * 1024 * 1024,
+            pixels: 40_000_000,
+            max_features: 4000,
+            max_top_n: 100,
+            queue: 32,
+            deadline_ms: 10_000,
+        }
+    }
+}
+
+impl Default for BootstrapConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            dataset: PathBuf::from("../shared/datasets/gardens-point"),
+            words: 2000,
+            seed: 1,
+        }
+    }
+}
+
+/// Values given on the command line; each one set replaces the configured one.
+#[derive(Debug, Clone, Default)]
+pub struct Overrides {
+    pub listen: Option<SocketAddr>,
+    pub vocabulary: Option<PathBuf>,
+    pub map: Option<PathBuf>,
+    pub workers: Option<usize>,
+    pub log_format: Option<LogFormat>,
+}
+
+/// A configuration that cannot be used, naming the key at fault.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct ConfigError(String);
+
+impl Config {
+    /// Built-in defaults, then the TOML file at `path`, then `BOWLOC_`
+    /// environment variables; checked.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        if !path.is_file() {
+            return Err(ConfigError(format!(
+                "{}: configuration file not found",
+                path.display()
+            )));
+        }
+        let config: Config = Figment::from(Serialized::defaults(Config::default()))
+            .merge(Toml::file_exact(path))
+            .merge(Env::prefixed(ENV_PREFIX).split("__"))
+            .extract()
+            .map_err(|e| {
+                let all: Vec<String> = e.into_iter().map(|e| e.to_string()).collect();
+                ConfigError(format!("invalid configuration: {}", all.join("; ")))
+            })?;
+        config.check()?;
+        Ok(config)
+    }
+
+    /// Apply command-line values, then check again.
+    pub fn apply(mut self, o: &Overrides) -> Result<Self, ConfigError> {
+        if let Some(v) = o.listen {
+            self.server.listen = v;
+        }
+        if let Some(v) = &o.vocabulary {
+            self.files.vocabulary = v.clone();
+        }
+        if let Some(v) = &o.map {
+            self.files.map = v.clone();
+        }
+        if let Some(v) = o.workers {
+            self.server.workers = v;
+        }
+        if let Some(v) = o.log_format {
+            self.server.log_format = v;
+        }
+        self.check()?;
+        Ok(self)
+    }
+
+    /// Values serde accepts but the service cannot work with.
+    pub fn check(&self) -> Result<(), ConfigError> {
+        let bad = |key: &str, why: String| Err(ConfigError(format!("{key}: {why}")));
+        let s = &self.search;
+        if let Err(e) = self.default_rule() {
+            return bad("search.rule / search.threshold", e);
+        }
+        if s.top_n == 0 || s.top_n > self.limits.max_top_n {
+            return bad(
+                "search.top_n",
+                format!(
+                    "must lie in 1..=limits.max_top_n ({}), got {}",
+                    self.limits.max_top_n, s.top_n
+                ),
+            );
+        }
+        if s.block == 0 {
+            return bad("search.block", "must be at least 1".into());
+        }
+        if !(s.min_score.is_finite() && s.min_score >= 0.0) {
+            return bad(
+                "search.min_score",
+                format!("must be a finite number ≥ 0, got {}", s.min_score),
+            );
+        }
+        let l = &self.limits;
+        if l.body_bytes == 0 {
+            return bad("limits.body_bytes", "must be at least 1".into());
+        }
+        if l.pixels == 0 {
+            return bad("limits.pixels", "must be at least 1".into());
+        }
+        if l.max_top_n == 0 {
+            return bad("limits.max_top_n", "must be at least 1".into());
+        }
+        if l.deadline_ms == 0 {
+            return bad("limits.deadline_ms", "must be at least 1".into());
+        }
+        if self.server.workers > 4096 {
+            return bad(
+                "server.workers",
+                format!(
+                    "{} threads is more than any machine needs",
+                    self.server.workers
+                ),
+            );
+        }
+        if self.bootstrap.enabled && self.bootstrap.words < 2 {
+            return bad("bootstrap.words", "must be at least 2".into());
+        }
+        Ok(())
+    }
+
+    /// The default rule with its parameter.
+    pub fn default_rule(&self) -> Result<RuleSpec, String> {
+        let s = &self.search;
+        let rule = RuleSpec::new(&s.rule, s.threshold)?;
+        if rule.parameter_name().is_none() && s.threshold.is_some() {
+            return Err(format!("rule `{}` takes no parameter", rule.name));
+        }
+        Ok(rule)
+    }
+
+    /// Worker threads: the configured count, or one per core.
+    pub fn worker_count(&self) -> usize {
+        match self.server.workers {
+            0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+            n => n,
+        }
+    }
+
+    pub fn deadline(&self) -> Duration {
+        Duration::from_millis(self.limits.deadline_ms)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use figment::Jail;
+
+    /// Load `toml` with the variables `env` set (figment's Jail restores the
+    /// environment and serializes the tests that use it).
+    #[allow(clippy::result_large_err)] // figment's error type, in a test
+    fn load_str(toml: &str, env: &[(&str, &str)]) -> Result<Config, String> {
+        let mut out = None;
+        Jail::expect_with(|jail| {
+            jail.create_file("c.toml", toml)?;
+            for (k, v) in env {
+                jail.set_env(k, v);
+            }
+            out = Some(Config::load(Path::new("c.toml")).map_err(|e| e.to_string()));
+            Ok(())
+        });
+        out.unwrap()
+    }
+
+    fn shipped() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("config/default.toml")
+    }
+
+    #[test]
+    fn shipped_file_equals_the_built_in_defaults() {
+        let text = std::fs::read_to_string(shipped()).unwrap();
+        assert_eq!(load_str(&text, &[]).unwrap(), Config::default());
+    }
+
+    #[test]
+    fn shipped_file_names_every_key() {
+        // Every key of the defaults appears in the file (optional keys that
+        // default to nothing are documented as comments).
+        let text = std::fs::read_to_string(shipped()).unwrap();
+        let file: toml::Table = text.parse().unwrap();
+        let defaults = toml::Table::try_from(Config::default()).unwrap();
+        for (section, keys) in &defaults {
+            let keys = keys.as_table().unwrap();
+            let in_file = file
+                .get(section)
+                .and_then(|s| s.as_table())
+                .unwrap_or_else(|| panic!("section [{section}] missing"));
+            for key in keys.keys() {
+                assert!(in_file.contains_key(key), "{section}.{key} missing");
+            }
+        }
+        assert!(
+            text.contains("# threshold ="),
+            "search.threshold undocumented"
+        );
+    }
+
+    #[test]
+    fn environment_overrides_the_file() {
+        let c = load_str(
+            "[search]\ntop_n = 3\n",
+            &[
+                ("BOWLOC_SEARCH__TOP_N", "7"),
+                ("BOWLOC_SERVER__LISTEN", "0.0.0.0:9000"),
+            ],
+        )
+        .unwrap();
+        assert_eq!(c.search.top_n, 7);
+        assert_eq!(c.server.listen, "0.0.0.0:9000".parse().unwrap());
+        assert_eq!(
+            load_str("[search]\ntop_n = 3\n", &[]).unwrap().search.top_n,
+            3
+        );
+    }
+
+    #[test]
+    fn unknown_keys_are_errors_naming_the_key() {
+        let e = load_str("[search]\ntop_m = 3\n", &[]).unwrap_err();
+        assert!(e.contains("top_m"), "{e}");
+        let e = load_str("[serch]\n", &[]).unwrap_err();
+        assert!(e.contains("serch"), "{e}");
+        let e = load_str("", &[("BOWLOC_LIMITS__BODY", "1")]).unwrap_err();
+        assert!(e.contains("body"), "{e}");
+    }
+
+    #[test]
+    fn bad_values_name_the_key() {
+        let cases = [
+            ("[server]\nlisten = \"nowhere\"\n", "listen"),
+            ("[server]\nlog_format = \"xml\"\n", "log_format"),
+            ("[limits]\nqueue = -1\n", "queue"),
+            ("[search]\ntop_n = 0\n", "search.top_n"),
+            ("[search]\ntop_n = 101\n", "search.top_n"),
+            ("[search]\nblock = 0\n", "search.block"),
+            ("[limits]\ndeadline_ms = 0\n", "limits.deadline_ms"),
+            ("[search]\nrule = \"fastest\"\n", "fastest"),
+            ("[search]\nrule = \"peak-mean\"\n", "needs a threshold"),
+            ("[search]\nthreshold = 0.5\n", "takes no parameter"),
+            (
+                "[search]\nrule = \"hoeffding\"\nthreshold = 2.0\n",
+                "search.rule",
+            ),
+        ];
+        for (toml, expected) in cases {
+            let e = load_str(toml, &[]).unwrap_err();
+            assert!(e.contains(expected), "{toml:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_rule_with_its_parameter_loads() {
+        let c = load_str("[search]\nrule = \"hoeffding\"\nthreshold = 0.05\n", &[]).unwrap();
+        assert_eq!(c.default_rule().unwrap().parameter, 0.05);
+    }
+
+    #[test]
+    fn missing_file_is_an_error() {
+        let e = Config::load(Path::new("/nonexistent/bowloc.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not found"), "{e}");
+    }
+
+    #[test]
+    fn flags_override_and_are_checked() {
+        let c = Config::default()
+            .apply(&Overrides {
+                workers: Some(3),
+                log_format: Some(LogFormat::Json),
+                ..Default::default()
+            })
+            .unwrap();
+        assert_eq!(c.worker_count(), 3);
+        assert_eq!(c.server.log_format, LogFormat::Json);
+        assert!(
+            Config::default()
+                .apply(&Overrides {
+                    workers: Some(1 << 20),
+                    ..Default::default()
+                })
+                .is_err()
+        );
+    }
+}

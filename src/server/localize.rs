@@ -1,0 +1,576 @@
+//! `POST /localize`: the query parameters and their checks, reading the image
+//! from a raw or multipart body, running the query on the worker pool with the
+//! request's deadline, and answering in JSON or protobuf.
+
+use super::AppState;
+use super::errors::{ApiError, ErrorBody};
+use super::proto;
+use super::workers::PoolError;
+use crate::report::Localization;
+use crate::search::stop::{rule_info, rule_names};
+use crate::search::{RuleSpec, SearchOptions};
+use axum::Json;
+use axum::body::Bytes;
+use axum::extract::{FromRequest, Multipart, RawQuery, Request, State};
+use axum::http::{HeaderMap, HeaderValue, header};
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use std::sync::Arc;
+use std::time::Instant;
+use utoipa::IntoParams;
+
+/// Query parameters of `POST /localize`. Each one absent takes the
+/// configured default; unknown parameters are errors.
+#[derive(Debug, Default, Deserialize, IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct LocalizeParams {
+    /// Candidates to return, 1 to the configured `limits.max_top_n`.
+    #[param(value_type = Option<u32>, minimum = 1)]
+    pub top_n: Option<String>,
+    /// Stopping rule (see the enumeration). Without a parameter it takes the
+    /// configured one if it is the configured rule.
+    #[param(value_type = Option<String>)]
+    pub rule: Option<String>,
+    /// The rule's parameter: threshold T of peak-mean, relative and
+    /// stable-peak; also accepted for the parameter of any rule that takes one.
+    #[param(value_type = Option<f64>)]
+    pub threshold: Option<String>,
+    /// Confidence δ of rule hoeffding, in (0, 1).
+    #[param(value_type = Option<f64>)]
+    pub delta: Option<String>,
+    /// Fraction of features of rule fixed, in (0, 1].
+    #[param(value_type = Option<f64>)]
+    pub fraction: Option<String>,
+    /// Seed of the feature permutation (0 to 2^64−1). Without it each request
+    /// draws its own; the answer reports the seed used.
+    #[param(value_type = Option<u64>)]
+    pub seed: Option<String>,
+    /// Drop candidates scoring below this (≥ 0).
+    #[param(value_type = Option<f32>)]
+    pub min_score: Option<String>,
+}
+
+/// What a request may ask for within the configuration.
+#[derive(Debug, Clone)]
+pub struct Defaults {
+    /// Everything but the seed, which each request draws.
+    pub options: SearchOptions,
+    pub max_top_n: usize,
+}
+
+impl LocalizeParams {
+    /// Parse a raw query string (`None`: no query).
+    pub fn from_query(query: Option<&str>) -> Result<Self, ApiError> {
+        serde_urlencoded::from_str(query.unwrap_or(""))
+            .map_err(|e| ApiError::bad_request("invalid_parameter", e.to_string()))
+    }
+
+    /// The search these parameters ask for, on top of `defaults`.
+    pub fn options(&self, defaults: &Defaults) -> Result<SearchOptions, ApiError> {
+        let mut o = defaults.options.clone();
+        o.rule = self.rule(&defaults.options.rule)?;
+        if let Some(v) = &self.top_n {
+            let n: usize = v.trim().parse().map_err(|_| {
+                ApiError::invalid_parameter("top_n", format!("`{v}` is not a whole number"))
+            })?;
+            if n == 0 || n > defaults.max_top_n {
+                return Err(ApiError::invalid_parameter(
+                    "top_n",
+                    format!("must lie in 1..={}, got {n}", defaults.max_top_n),
+                ));
+            }
+            o.top_n = n;
+        }
+        o.seed = match &self.seed {
+            Some(v) => v.trim().parse().map_err(|_| {
+                ApiError::invalid_parameter(
+                    "seed",
+                    format!("`{v}` is not a whole number in 0..={}", u64::MAX),
+                )
+            })?,
+            None => rand::random(),
+        };
+        if let Some(v) = &self.min_score {
+            let s = number("min_score", v)?;
+            if s < 0.0 {
+                return Err(ApiError::invalid_parameter(
+                    "min_score",
+                    format!("must be ≥ 0, got {s}"),
+                ));
+            }
+            o.min_score = s as f32;
+        }
+        Ok(o)
+    }
+
+    /// The rule and its parameter.
+    fn rule(&self, default: &RuleSpec) -> Result<RuleSpec, ApiError> {
+        let given: Vec<(&str, &String)> = [
+            ("threshold", &self.threshold),
+            ("delta", &self.delta),
+            ("fraction", &self.fraction),
+        ]
+        .into_iter()
+        .filter_map(|(n, v)| v.as_ref().map(|v| (n, v)))
+        .collect();
+        if given.len() > 1 {
+            return Err(ApiError::invalid_parameter(
+                given[1].0,
+                "give only one of threshold, delta and fraction",
+            ));
+        }
+        let name = self.rule.as_deref().unwrap_or(&default.name);
+        let info = rule_info(name).ok_or_else(|| {
+            ApiError::bad_request(
+                "unknown_rule",
+                format!(
+                    "unknown rule `{name}`; known rules: {}",
+                    rule_names().join(", ")
+                ),
+            )
+        })?;
+        let value = match given.first() {
+            None => None,
+            Some(&(what, v)) => {
+                let value = number(what, v)?;
+                match info.parameter {
+                    None => {
+                        return Err(ApiError::invalid_parameter(
+                            what,
+                            format!("rule `{name}` takes no parameter"),
+                        ));
+                    }
+                    Some(p) if what != "threshold" && what != p => {
+                        return Err(ApiError::invalid_parameter(
+                            what,
+                            format!("rule `{name}` takes a {p}, not a {what}"),
+                        ));
+                    }
+                    Some(_) => Some(value),
+                }
+            }
+        };
+        if value.is_none() && info.name == default.name {
+            return Ok(default.clone());
+        }
+        let what = given.first().map_or("rule", |g| g.0);
+        RuleSpec::new(info.name, value).map_err(|e| ApiError::invalid_parameter(what, e))
+    }
+}
+
+/// A finite number.
+fn number(name: &str, v: &str) -> Result<f64, ApiError> {
+    let x: f64 = v
+        .trim()
+        .parse()
+        .map_err(|_| ApiError::invalid_parameter(name, format!("`{v}` is not a number")))?;
+    if !x.is_finite() {
+        return Err(ApiError::invalid_parameter(
+            name,
+            format!("must be a finite number, got `{v}`"),
+        ));
+    }
+    Ok(x)
+}
+
+/// How the answer is encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    Json,
+    Protobuf,
+}
+
+impl Format {
+    /// Protobuf when `Accept` lists `application/x-protobuf` (or
+    /// `application/protobuf`) with a non-zero quality; JSON otherwise.
+    pub fn from_accept(headers: &HeaderMap) -> Self {
+        let wants_protobuf = headers
+            .get_all(header::ACCEPT)
+            .iter()
+            .filter_map(|v| v.to_str().ok())
+            .flat_map(|v| v.split(','))
+            .any(|item| {
+                let mut parts = item.split(';').map(str::trim);
+                let media = parts.next().unwrap_or("").to_ascii_lowercase();
+                let refused = parts.any(|p| {
+                    p.strip_prefix("q=")
+                        .and_then(|q| q.trim().parse::<f32>().ok())
+                        .is_some_and(|q| q <= 0.0)
+                });
+                (media == proto::CONTENT_TYPE || media == "application/protobuf") && !refused
+            });
+        if wants_protobuf {
+            Self::Protobuf
+        } else {
+            Self::Json
+        }
+    }
+}
+
+/// How the image arrives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum BodyKind {
+    Raw,
+    Multipart,
+}
+
+/// Check the content type before reading anything.
+fn body_kind(headers: &HeaderMap) -> Result<BodyKind, ApiError> {
+    let expected = "send the image as the body with Content-Type image/* or \
+                    application/octet-stream, or as multipart/form-data with a field `image`";
+    let Some(value) = headers.get(header::CONTENT_TYPE) else {
+        return Err(ApiError::unsupported_media_type(format!(
+            "no Content-Type; {expected}"
+        )));
+    };
+    let text = value.to_str().unwrap_or("");
+    let media = text
+        .split(';')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_ascii_lowercase();
+    match media.as_str() {
+        "multipart/form-data" => Ok(BodyKind::Multipart),
+        "application/octet-stream" => Ok(BodyKind::Raw),
+        m if m.starts_with("image/") => Ok(BodyKind::Raw),
+        _ => Err(ApiError::unsupported_media_type(format!(
+            "Content-Type `{text}` is not accepted; {expected}"
+        ))),
+    }
+}
+
+/// Whether a body error is the size limit.
+fn is_length_limit(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut cause: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(c) = cause {
+        if c.is::<http_body_util::LengthLimitError>() {
+            return true;
+        }
+        cause = c.source();
+    }
+    false
+}
+
+/// The image bytes of the request.
+async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiError> {
+    let limit = state.config.limits.body_bytes;
+    let kind = body_kind(request.headers())?;
+    let declared = request
+        .headers()
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    if declared.is_some_and(|n| n > limit as u64) {
+        return Err(ApiError::body_too_large(limit));
+    }
+    match kind {
+        BodyKind::Raw => axum::body::to_bytes(request.into_body(), limit)
+            .await
+            .map_err(|e| {
+                let e = e.into_inner();
+                if is_length_limit(e.as_ref()) {
+                    ApiError::body_too_large(limit)
+                } else {
+                    ApiError::bad_request("body_read_error", format!("cannot read the body: {e}"))
+                }
+            }),
+        BodyKind::Multipart => {
+            // The body limit applies through the router's DefaultBodyLimit.
+            let mut multipart = Multipart::from_request(request, &())
+                .await
+                .map_err(|e| ApiError::bad_request("invalid_multipart", e.body_text()))?;
+            let multipart_error = |e: axum::extract::multipart::MultipartError| {
+                if e.status() == axum::http::StatusCode::PAYLOAD_TOO_LARGE {
+                    ApiError::body_too_large(limit)
+                } else {
+                    ApiError::bad_request("invalid_multipart", e.body_text())
+                }
+            };
+            while let Some(field) = multipart.next_field().await.map_err(multipart_error)? {
+                if field.name() == Some("image") {
+                    return field.bytes().await.map_err(multipart_error);
+                }
+            }
+            Err(ApiError::bad_request(
+                "missing_image_field",
+                "the multipart body has no field named `image`",
+            ))
+        }
+    }
+}
+
+/// What the request log line reports about a localization.
+#[derive(Debug, Clone, Copy)]
+pub struct LocalizeSummary {
+    pub features: usize,
+    pub fraction: f64,
+    pub candidates: usize,
+}
+
+/// Localize an image.
+///
+/// The body is the image itself (`Content-Type: image/*` or
+/// `application/octet-stream`) or `multipart/form-data` with a field `image`.
+/// An image in which no features are found is answered 200 with no
+/// candidates, `features.total` 0 and stop kind `exhausted`. When the
+/// request's deadline passes during the search, the answer so far is sent
+/// with stop kind `deadline`. Errors are always JSON.
+#[utoipa::path(
+    post,
+    path = "/localize",
+    tag = "localize",
+    params(LocalizeParams),
+    request_body(
+        description = "The query image (JPEG, PNG, BMP, TIFF, WebP, PNM), raw or as multipart field `image`.",
+        content(
+            (Vec<u8> = "image/jpeg"),
+            (Vec<u8> = "image/png"),
+            (Vec<u8> = "application/octet-stream"),
+            (ImageUpload = "multipart/form-data"),
+        ),
+    ),
+    responses(
+        (status = 200, description = "Candidates best first, with features used, stop and timings.",
+            content(
+                (Localization = "application/json"),
+                (Vec<u8> = "application/x-protobuf"),
+            )),
+        (status = 400, description = "Bad parameter (`invalid_parameter`, `unknown_rule`), empty body (`empty_body`), bad multipart (`invalid_multipart`, `missing_image_field`).", body = ErrorBody),
+        (status = 413, description = "Body over `limits.body_bytes` (`body_too_large`).", body = ErrorBody),
+        (status = 415, description = "Content type not accepted (`unsupported_media_type`).", body = ErrorBody),
+        (status = 422, description = "Not a decodable image (`undecodable_image`), more pixels than `limits.pixels` (`image_too_large`), extraction failed (`extraction_failed`).", body = ErrorBody),
+        (status = 503, description = "Map not loaded yet (`not_ready`), all workers busy and queue full (`overloaded`), or no worker free before the deadline (`queue_timeout`); see Retry-After.", body = ErrorBody,
+            headers(("Retry-After" = u32, description = "Seconds to wait before retrying."))),
+    )
+)]
+pub async fn localize(
+    State(state): State<Arc<AppState>>,
+    RawQuery(query): RawQuery,
+    request: Request,
+) -> Result<Response, ApiError> {
+    let arrived = Instant::now();
+    let deadline = arrived + state.config.deadline();
+    let localizer = state.localizer()?;
+    let format = Format::from_accept(request.headers());
+    let mut options = LocalizeParams::from_query(query.as_deref())?.options(&state.defaults)?;
+    options.deadline = Some(deadline);
+    let image = read_image(&state, request).await?;
+    if image.is_empty() {
+        return Err(crate::features::FeatureError::Empty.into());
+    }
+    // Only formats whose header gives the size reach the decoder, so the
+    // pixel limit is always checked before any pixel is decoded.
+    if imagesize::blob_size(&image).is_err() {
+        return Err(ApiError::undecodable(
+            "not an image in a known format (JPEG, PNG, BMP, TIFF, WebP, PNM), or its header is damaged",
+        ));
+    }
+    let answer = state
+        .pool
+        .run(Some(tokio::time::Instant::from_std(deadline)), move || {
+            localizer.localize(&image, &options)
+        })
+        .await
+        .map_err(|e| match e {
+            PoolError::QueueFull => ApiError::overloaded(state.pool.queue_capacity()),
+            PoolError::TimedOut => ApiError::queue_timeout(),
+            PoolError::Panicked(m) => {
+                tracing::error!("localization panicked: {m}");
+                ApiError::internal("the query failed unexpectedly")
+            }
+        })??;
+    super::metrics::localized(&answer);
+    let summary = LocalizeSummary {
+        features: answer.features.total,
+        fraction: answer.features.fraction,
+        candidates: answer.candidates.len(),
+    };
+    let mut response = encode(&answer, format);
+    response.extensions_mut().insert(summary);
+    Ok(response)
+}
+
+fn encode(answer: &Localization, format: Format) -> Response {
+    match format {
+        Format::Json => Json(answer).into_response(),
+        Format::Protobuf => (
+            [(
+                header::CONTENT_TYPE,
+                HeaderValue::from_static(proto::CONTENT_TYPE),
+            )],
+            proto::encode(answer),
+        )
+            .into_response(),
+    }
+}
+
+/// The multipart form of the request body (OpenAPI only).
+#[derive(utoipa::ToSchema)]
+#[allow(dead_code)]
+pub struct ImageUpload {
+    /// The image file.
+    #[schema(value_type = String, format = Binary)]
+    image: Vec<u8>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn defaults() -> Defaults {
+        Defaults {
+            options: SearchOptions {
+                rule: RuleSpec::new("peak-mean", Some(0.5)).unwrap(),
+                ..Default::default()
+            },
+            max_top_n: 50,
+        }
+    }
+
+    fn parse(q: &str) -> Result<SearchOptions, ApiError> {
+        LocalizeParams::from_query(Some(q))?.options(&defaults())
+    }
+
+    fn code(q: &str) -> (&'static str, String) {
+        let e = parse(q).unwrap_err();
+        assert_eq!(e.status, 400, "{q}");
+        (e.code, e.message)
+    }
+
+    #[test]
+    fn defaults_apply_when_absent() {
+        let o = LocalizeParams::from_query(None)
+            .unwrap()
+            .options(&defaults())
+            .unwrap();
+        assert_eq!(o.rule, defaults().options.rule);
+        assert_eq!(o.top_n, defaults().options.top_n);
+        // The configured rule without a parameter keeps the configured one.
+        assert_eq!(parse("rule=peak-mean").unwrap().rule.parameter, 0.5);
+    }
+
+    #[test]
+    fn parameters_are_taken() {
+        let o = parse("top_n=3&rule=hoeffding&delta=0.1&seed=42&min_score=0.2").unwrap();
+        assert_eq!(o.top_n, 3);
+        assert_eq!(o.rule, RuleSpec::new("hoeffding", Some(0.1)).unwrap());
+        assert_eq!(o.seed, 42);
+        assert_eq!(o.min_score, 0.2);
+        assert_eq!(
+            parse("rule=hoeffding&threshold=0.1")
+                .unwrap()
+                .rule
+                .parameter,
+            0.1
+        );
+        assert_eq!(
+            parse("rule=fixed&fraction=0.5").unwrap().rule.parameter,
+            0.5
+        );
+        assert_eq!(parse("threshold=2").unwrap().rule.parameter, 2.0);
+        assert_eq!(parse("rule=none").unwrap().rule.name, "none");
+        assert_eq!(parse(&format!("seed={}", u64::MAX)).unwrap().seed, u64::MAX);
+    }
+
+    #[test]
+    fn bad_parameters_are_400_with_a_code() {
+        let cases = [
+            ("rule=fastest", "unknown_rule", "fastest"),
+            ("top_n=0", "invalid_parameter", "top_n"),
+            ("top_n=51", "invalid_parameter", "top_n"),
+            (
+                "top_n=99999999999999999999999",
+                "invalid_parameter",
+                "top_n",
+            ),
+            ("top_n=-1", "invalid_parameter", "top_n"),
+            ("threshold=NaN", "invalid_parameter", "threshold"),
+            ("threshold=inf", "invalid_parameter", "threshold"),
+            ("threshold=-1", "invalid_parameter", "threshold"),
+            ("threshold=abc", "invalid_parameter", "threshold"),
+            ("threshold=", "invalid_parameter", "threshold"),
+            ("seed=abc", "invalid_parameter", "seed"),
+            ("seed=-3", "invalid_parameter", "seed"),
+            ("seed=1.5", "invalid_parameter", "seed"),
+            ("min_score=-0.1", "invalid_parameter", "min_score"),
+            ("rule=relative", "invalid_parameter", "needs a threshold"),
+            (
+                "rule=none&threshold=1",
+                "invalid_parameter",
+                "takes no parameter",
+            ),
+            ("rule=peak-mean&delta=0.1", "invalid_parameter", "delta"),
+            (
+                "rule=hoeffding&fraction=0.1",
+                "invalid_parameter",
+                "fraction",
+            ),
+            ("rule=hoeffding&delta=1.5", "invalid_parameter", "delta"),
+            (
+                "rule=stable-peak&threshold=2.5",
+                "invalid_parameter",
+                "whole number",
+            ),
+            ("threshold=1&delta=0.1", "invalid_parameter", "only one"),
+            ("top_k=3", "invalid_parameter", "top_k"),
+            ("top_n=1&top_n=2", "invalid_parameter", "top_n"),
+        ];
+        for (q, expected_code, mentions) in cases {
+            let (c, m) = code(q);
+            assert_eq!(c, expected_code, "{q}: {m}");
+            assert!(m.contains(mentions), "{q}: {m}");
+        }
+    }
+
+    #[test]
+    fn seeds_are_drawn_when_absent() {
+        let seeds: std::collections::HashSet<u64> =
+            (0..8).map(|_| parse("").unwrap().seed).collect();
+        assert!(seeds.len() > 1);
+    }
+
+    #[test]
+    fn accept_chooses_the_format() {
+        let with = |v: &str| {
+            let mut h = HeaderMap::new();
+            h.insert(header::ACCEPT, v.parse().unwrap());
+            Format::from_accept(&h)
+        };
+        assert_eq!(Format::from_accept(&HeaderMap::new()), Format::Json);
+        assert_eq!(with("application/json"), Format::Json);
+        assert_eq!(with("*/*"), Format::Json);
+        assert_eq!(with("application/x-protobuf"), Format::Protobuf);
+        assert_eq!(
+            with("application/json;q=0.5, application/x-protobuf"),
+            Format::Protobuf
+        );
+        assert_eq!(with("application/x-protobuf;q=0"), Format::Json);
+    }
+
+    #[test]
+    fn content_types() {
+        let with = |v: &str| {
+            let mut h = HeaderMap::new();
+            h.insert(header::CONTENT_TYPE, v.parse().unwrap());
+            body_kind(&h).map_err(|e| e.code)
+        };
+        assert_eq!(with("image/jpeg"), Ok(BodyKind::Raw));
+        assert_eq!(with("IMAGE/PNG"), Ok(BodyKind::Raw));
+        assert_eq!(with("application/octet-stream"), Ok(BodyKind::Raw));
+        assert_eq!(
+            with("multipart/form-data; boundary=x"),
+            Ok(BodyKind::Multipart)
+        );
+        assert_eq!(with("text/plain"), Err("unsupported_media_type"));
+        assert_eq!(
+            with("application/x-www-form-urlencoded"),
+            Err("unsupported_media_type")
+        );
+        assert_eq!(
+            body_kind(&HeaderMap::new()).map_err(|e| e.code),
+            Err("unsupported_media_type")
+        );
+    }
+}

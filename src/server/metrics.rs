@@ -1,0 +1,170 @@
+//! Prometheus metrics: the recorder (installed once per process), the names
+//! and help texts of every metric the service exports, and small functions
+//! the handlers call to record them. Names follow Prometheus conventions:
+//! `bowloc_` prefix, base units (`_seconds`), `_total` for counters.
+
+use crate::index::MapIndex;
+use crate::report::Localization;
+use metrics::{
+    Unit, counter, describe_counter, describe_gauge, describe_histogram, gauge, histogram,
+};
+use metrics_exporter_prometheus::{Matcher, PrometheusBuilder, PrometheusHandle};
+use std::sync::OnceLock;
+use std::time::Duration;
+
+pub const HTTP_REQUESTS: &str = "bowloc_http_requests_total";
+pub const HTTP_DURATION: &str = "bowloc_http_request_duration_seconds";
+pub const HTTP_IN_FLIGHT: &str = "bowloc_http_requests_in_flight";
+pub const REJECTED: &str = "bowloc_rejected_requests_total";
+pub const STAGE_DURATION: &str = "bowloc_localize_stage_duration_seconds";
+pub const FRACTION_USED: &str = "bowloc_localize_features_used_fraction";
+pub const QUERY_FEATURES: &str = "bowloc_localize_query_features";
+pub const STOPS: &str = "bowloc_localize_stops_total";
+pub const WORKERS: &str = "bowloc_workers";
+pub const WORKERS_BUSY: &str = "bowloc_workers_busy";
+pub const QUEUE_WAITING: &str = "bowloc_queue_waiting";
+pub const QUEUE_CAPACITY: &str = "bowloc_queue_capacity";
+pub const READY: &str = "bowloc_ready";
+pub const MAP_IMAGES: &str = "bowloc_map_images";
+pub const MAP_WORDS: &str = "bowloc_map_words";
+pub const MAP_POSTINGS: &str = "bowloc_map_postings";
+pub const BUILD_INFO: &str = "bowloc_build_info";
+
+/// The process's recorder. Installed by the first caller; later callers (a
+/// test building several routers) share it.
+pub fn install() -> PrometheusHandle {
+    static HANDLE: OnceLock<PrometheusHandle> = OnceLock::new();
+    HANDLE
+        .get_or_init(|| {
+            let latency = [
+                0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
+            ];
+            let fraction = [0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 1.0];
+            let features = [
+                0.0, 50.0, 100.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0,
+            ];
+            let handle = PrometheusBuilder::new()
+                .set_buckets_for_metric(Matcher::Suffix("_seconds".into()), &latency)
+                .and_then(|b| {
+                    b.set_buckets_for_metric(Matcher::Full(FRACTION_USED.into()), &fraction)
+                })
+                .and_then(|b| {
+                    b.set_buckets_for_metric(Matcher::Full(QUERY_FEATURES.into()), &features)
+                })
+                .expect("bucket lists are not empty")
+                .install_recorder()
+                .expect("no other metrics recorder is installed");
+            describe();
+            gauge!(BUILD_INFO, "version" => env!("CARGO_PKG_VERSION")).set(1.0);
+            handle
+        })
+        .clone()
+}
+
+fn describe() {
+    describe_counter!(
+        HTTP_REQUESTS,
+        "HTTP requests answered, by route, method and status."
+    );
+    describe_histogram!(
+        HTTP_DURATION,
+        Unit::Seconds,
+        "Time to answer an HTTP request, by route."
+    );
+    describe_gauge!(HTTP_IN_FLIGHT, "HTTP requests being answered now.");
+    describe_counter!(
+        REJECTED,
+        "Requests answered with an error, by error code (reason)."
+    );
+    describe_histogram!(
+        STAGE_DURATION,
+        Unit::Seconds,
+        "Time per stage of a localization: decode, extract, quantize, vote and total."
+    );
+    describe_histogram!(
+        FRACTION_USED,
+        "Fraction of a query's features used before the search stopped."
+    );
+    describe_histogram!(QUERY_FEATURES, "Features extracted from a query image.");
+    describe_counter!(
+        STOPS,
+        "Searches by why they stopped: rule, exhausted or deadline."
+    );
+    describe_gauge!(WORKERS, "Worker threads for CPU work.");
+    describe_gauge!(WORKERS_BUSY, "Workers running a query now.");
+    describe_gauge!(QUEUE_WAITING, "Requests waiting for a free worker.");
+    describe_gauge!(
+        QUEUE_CAPACITY,
+        "Requests that may wait before new ones are refused."
+    );
+    describe_gauge!(
+        READY,
+        "1 once the map is loaded and the service takes traffic."
+    );
+    describe_gauge!(MAP_IMAGES, "Images in the loaded map.");
+    describe_gauge!(MAP_WORDS, "Visual words of the loaded vocabulary.");
+    describe_gauge!(
+        MAP_POSTINGS,
+        "(word, image) entries of the loaded map's inverted index."
+    );
+    describe_gauge!(BUILD_INFO, "Always 1; the version is a label.");
+}
+
+/// One answered HTTP request.
+pub fn request(route: &str, method: &str, status: u16, elapsed: Duration) {
+    counter!(
+        HTTP_REQUESTS,
+        "route" => route.to_owned(),
+        "method" => method.to_owned(),
+        "status" => status.to_string()
+    )
+    .increment(1);
+    histogram!(HTTP_DURATION, "route" => route.to_owned()).record(elapsed.as_secs_f64());
+}
+
+/// Requests in flight went up (`+1`) or down (`-1`).
+pub fn in_flight(delta: f64) {
+    gauge!(HTTP_IN_FLIGHT).increment(delta);
+}
+
+/// A request answered with error `code`.
+pub fn rejected(code: &'static str) {
+    counter!(REJECTED, "reason" => code).increment(1);
+}
+
+/// A localization answered.
+pub fn localized(answer: &Localization) {
+    let t = &answer.timings_ms;
+    for (stage, ms) in [
+        ("decode", t.decode),
+        ("extract", t.extract),
+        ("quantize", t.quantize),
+        ("vote", t.vote),
+        ("total", t.total),
+    ] {
+        histogram!(STAGE_DURATION, "stage" => stage).record(ms / 1e3);
+    }
+    histogram!(FRACTION_USED).record(answer.features.fraction);
+    histogram!(QUERY_FEATURES).record(answer.features.total as f64);
+    counter!(STOPS, "kind" => super::proto::stop_kind_name(answer.stop.kind)).increment(1);
+}
+
+/// The worker pool's size and occupancy.
+pub fn pool(workers: usize, busy: usize, waiting: usize, capacity: usize) {
+    gauge!(WORKERS).set(workers as f64);
+    gauge!(WORKERS_BUSY).set(busy as f64);
+    gauge!(QUEUE_WAITING).set(waiting as f64);
+    gauge!(QUEUE_CAPACITY).set(capacity as f64);
+}
+
+/// The map is loaded.
+pub fn map_loaded(map: &MapIndex) {
+    let m = map.meta();
+    gauge!(MAP_IMAGES).set(m.images as f64);
+    gauge!(MAP_WORDS).set(m.words as f64);
+    gauge!(MAP_POSTINGS).set(m.postings as f64);
+}
+
+pub fn ready(ready: bool) {
+    gauge!(READY).set(if ready { 1.0 } else { 0.0 });
+}

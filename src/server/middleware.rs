@@ -1,0 +1,79 @@
+//! What wraps every request: the request id (`x-request-id` taken from the
+//! client or generated, and echoed back), one log line per request with its
+//! id, route, status, latency and fraction of features used, the per-route
+//! request metrics, and turning a panic in a handler into a JSON 500.
+
+use super::errors::ApiError;
+use super::localize::LocalizeSummary;
+use super::metrics;
+use super::workers::panic_message;
+use axum::extract::{MatchedPath, Request};
+use axum::http::HeaderName;
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use std::time::Instant;
+use tracing::Instrument;
+
+pub const REQUEST_ID: HeaderName = HeaderName::from_static("x-request-id");
+
+/// Log and count one request.
+pub async fn observe(request: Request, next: Next) -> Response {
+    let started = Instant::now();
+    let route = request
+        .extensions()
+        .get::<MatchedPath>()
+        .map_or("unmatched", |m| m.as_str())
+        .to_owned();
+    let method = request.method().clone();
+    let id = request
+        .headers()
+        .get(&REQUEST_ID)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_owned();
+    metrics::in_flight(1.0);
+    let _in_flight = InFlight;
+    let span = tracing::info_span!("request", id = %id);
+    let response = next.run(request).instrument(span).await;
+    let elapsed = started.elapsed();
+    let status = response.status().as_u16();
+    metrics::request(&route, method.as_str(), status, elapsed);
+    let latency_ms = elapsed.as_secs_f64() * 1e3;
+    match response.extensions().get::<LocalizeSummary>() {
+        Some(s) => tracing::info!(
+            request_id = %id,
+            method = %method,
+            route,
+            status,
+            latency_ms,
+            fraction_used = s.fraction,
+            features = s.features,
+            candidates = s.candidates,
+            "request"
+        ),
+        None => tracing::info!(
+            request_id = %id,
+            method = %method,
+            route,
+            status,
+            latency_ms,
+            "request"
+        ),
+    }
+    response
+}
+
+/// Takes the in-flight gauge down again however the request ends.
+struct InFlight;
+
+impl Drop for InFlight {
+    fn drop(&mut self) {
+        metrics::in_flight(-1.0);
+    }
+}
+
+/// The answer to a panic in a handler.
+pub fn panic_response(payload: Box<dyn std::any::Any + Send + 'static>) -> Response {
+    tracing::error!("handler panicked: {}", panic_message(payload.as_ref()));
+    ApiError::internal("the request failed unexpectedly").into_response()
+}

@@ -1,0 +1,241 @@
+//! The HTTP service (`bowloc serve`): an axum router over a shared state
+//! holding the configuration, the worker pool and — once loaded — the
+//! memory-mapped vocabulary and map. Start-up binds the listener first (so
+//! `/healthz` answers while the map is loaded or bootstrapped, `/readyz` once
+//! it is), and SIGTERM / SIGINT stop it gracefully: new connections are
+//! refused, requests in flight finish, and [`run`] returns.
+//!
+//! - [`config`]: configuration (file, environment, flags) and its checks;
+//! - [`bootstrap`]: building a missing default map, then loading;
+//! - [`localize`]: `POST /localize`, its parameters and body;
+//! - [`status`]: health, readiness, `/map`, `/metrics`, `/openapi.json`;
+//! - [`workers`]: the bounded pool for CPU work;
+//! - [`errors`]: error answers as JSON;
+//! - [`middleware`]: request ids, request logs and metrics, panics;
+//! - [`metrics`], [`openapi`], [`proto`]: the exported metrics, the API
+//!   document and the protobuf answer.
+
+pub mod bootstrap;
+pub mod config;
+pub mod errors;
+pub mod localize;
+pub mod metrics;
+pub mod middleware;
+pub mod openapi;
+pub mod proto;
+pub mod status;
+pub mod workers;
+
+use crate::pipeline::Localizer;
+use axum::Router;
+use axum::extract::DefaultBodyLimit;
+use axum::routing::{get, post};
+use config::Config;
+use errors::ApiError;
+use localize::Defaults;
+use metrics_exporter_prometheus::PrometheusHandle;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::Duration;
+use tokio::net::TcpListener;
+use tower::ServiceBuilder;
+use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use workers::WorkerPool;
+
+/// What every handler shares.
+pub struct AppState {
+    pub config: Config,
+    pub defaults: Defaults,
+    pub pool: WorkerPool,
+    pub metrics: PrometheusHandle,
+    localizer: OnceLock<Arc<Localizer>>,
+    shutting_down: AtomicBool,
+}
+
+impl AppState {
+    /// State for `config` (already checked), with no map loaded yet.
+    pub fn new(config: Config) -> anyhow::Result<Arc<Self>> {
+        let rule = config.default_rule().map_err(anyhow::Error::msg)?;
+        let s = &config.search;
+        let defaults = Defaults {
+            options: crate::search::SearchOptions {
+                rule,
+                top_n: s.top_n,
+                seed: 0,
+                block: s.block,
+                min_features: s.min_features,
+                min_score: s.min_score,
+                deadline: None,
+            },
+            max_top_n: config.limits.max_top_n,
+        };
+        let pool = WorkerPool::new(config.worker_count(), config.limits.queue);
+        let metrics = metrics::install();
+        metrics::ready(false);
+        Ok(Arc::new(Self {
+            config,
+            defaults,
+            pool,
+            metrics,
+            localizer: OnceLock::new(),
+            shutting_down: AtomicBool::new(false),
+        }))
+    }
+
+    /// Make the service ready with this vocabulary and map.
+    pub fn set_localizer(&self, localizer: Localizer) {
+        metrics::map_loaded(&localizer.map);
+        let m = localizer.map.meta();
+        tracing::info!(
+            map = %m.name,
+            images = m.images,
+            words = m.words,
+            vocabulary = %m.vocab_hash,
+            workers = self.pool.workers(),
+            queue = self.pool.queue_capacity(),
+            "ready"
+        );
+        if self.localizer.set(Arc::new(localizer)).is_ok() {
+            metrics::ready(true);
+        }
+    }
+
+    /// The loaded localizer, or 503 while loading.
+    pub fn localizer(&self) -> Result<Arc<Localizer>, ApiError> {
+        self.localizer
+            .get()
+            .cloned()
+            .ok_or_else(|| ApiError::not_ready("the map is still loading; retry later"))
+    }
+
+    pub fn begin_shutdown(&self) {
+        self.shutting_down.store(true, Ordering::SeqCst);
+        metrics::ready(false);
+    }
+
+    pub fn is_shutting_down(&self) -> bool {
+        self.shutting_down.load(Ordering::SeqCst)
+    }
+}
+
+/// Every route with its layers.
+pub fn router(state: Arc<AppState>) -> Router {
+    let body_limit = state.config.limits.body_bytes;
+    Router::new()
+        .route("/localize", post(localize::localize))
+        .route("/healthz", get(status::healthz))
+        .route("/readyz", get(status::readyz))
+        .route("/map", get(status::map))
+        .route("/metrics", get(status::metrics))
+        .route("/openapi.json", get(status::openapi))
+        .fallback(|| async { ApiError::not_found() })
+        .method_not_allowed_fallback(|| async { ApiError::method_not_allowed() })
+        .layer(
+            ServiceBuilder::new()
+                .layer(SetRequestIdLayer::new(
+                    middleware::REQUEST_ID,
+                    MakeRequestUuid,
+                ))
+                .layer(PropagateRequestIdLayer::new(middleware::REQUEST_ID))
+                .layer(axum::middleware::from_fn(middleware::observe))
+                .layer(CatchPanicLayer::custom(middleware::panic_response))
+                .layer(DefaultBodyLimit::max(body_limit)),
+        )
+        .with_state(state)
+}
+
+/// Bind the configured address and serve until SIGTERM or SIGINT.
+pub async fn run(config: Config) -> anyhow::Result<()> {
+    let listener = TcpListener::bind(config.server.listen)
+        .await
+        .map_err(|e| anyhow::anyhow!("server.listen {}: {e}", config.server.listen))?;
+    serve(config, listener, shutdown_signal()).await
+}
+
+/// Serve on `listener` until `shutdown` resolves: load (or bootstrap) the map
+/// in the background, then take traffic. A map that cannot be loaded stops
+/// the service with an error.
+pub async fn serve(
+    config: Config,
+    listener: TcpListener,
+    shutdown: impl Future<Output = &'static str> + Send,
+) -> anyhow::Result<()> {
+    let state = AppState::new(config)?;
+    let address = listener.local_addr()?;
+    let (stop_tx, mut stop_rx) = tokio::sync::watch::channel(false);
+    let app = router(state.clone());
+    let mut server = tokio::spawn(
+        axum::serve(listener, app)
+            .with_graceful_shutdown(async move {
+                let _ = stop_rx.wait_for(|stop| *stop).await;
+            })
+            .into_future(),
+    );
+    tracing::info!("listening on http://{address}");
+    let upkeep = {
+        let handle = state.metrics.clone();
+        tokio::spawn(async move {
+            let mut tick = tokio::time::interval(Duration::from_secs(5));
+            loop {
+                tick.tick().await;
+                handle.run_upkeep();
+            }
+        })
+    };
+    let load_config = state.config.clone();
+    let mut loader = Some(tokio::task::spawn_blocking(move || {
+        bootstrap::load(&load_config)
+    }));
+    tokio::pin!(shutdown);
+    let outcome: anyhow::Result<()> = loop {
+        tokio::select! {
+            loaded = async { loader.as_mut().expect("guarded").await }, if loader.is_some() => {
+                loader = None;
+                match loaded {
+                    Ok(Ok(localizer)) => state.set_localizer(localizer),
+                    Ok(Err(e)) => break Err(e.context("cannot load the map")),
+                    Err(e) => break Err(anyhow::anyhow!("loading the map failed: {e}")),
+                }
+            }
+            signal = &mut shutdown => {
+                tracing::info!("{signal} received: finishing requests in flight, then stopping");
+                break Ok(());
+            }
+            ended = &mut server => {
+                break match ended {
+                    Ok(Ok(())) => Err(anyhow::anyhow!("the server stopped unexpectedly")),
+                    Ok(Err(e)) => Err(anyhow::anyhow!("the server failed: {e}")),
+                    Err(e) => Err(anyhow::anyhow!("the server failed: {e}")),
+                };
+            }
+        }
+    };
+    state.begin_shutdown();
+    let _ = stop_tx.send(true);
+    // Requests in flight have at most their deadline left; give them that.
+    let grace = state.config.deadline() + Duration::from_secs(2);
+    if !server.is_finished() && tokio::time::timeout(grace, &mut server).await.is_err() {
+        tracing::warn!(
+            "connections still open {} s after shutdown began; stopping anyway",
+            grace.as_secs()
+        );
+    }
+    upkeep.abort();
+    tracing::info!("stopped");
+    outcome
+}
+
+/// Resolves at SIGTERM or SIGINT, naming it. The handlers are installed
+/// when this is called (inside the runtime), not when it is first polled.
+pub fn shutdown_signal() -> impl Future<Output = &'static str> + Send {
+    use tokio::signal::unix::{SignalKind, signal};
+    let mut term = signal(SignalKind::terminate()).expect("SIGTERM handler");
+    let mut int = signal(SignalKind::interrupt()).expect("SIGINT handler");
+    async move {
+        tokio::select! {
+            _ = term.recv() => "SIGTERM",
+            _ = int.recv() => "SIGINT",
+        }
+    }
+}

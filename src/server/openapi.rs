@@ -1,0 +1,134 @@
+//! The API described as an OpenAPI document (utoipa), built from the
+//! handlers' annotations and the answer types themselves, with the list of
+//! stopping rules filled in from the rule registry. `docs/openapi.json` is a
+//! committed copy; a test checks it equals what the server serves.
+
+use super::errors::{ErrorBody, ErrorDetail};
+use super::localize::{self, ImageUpload};
+use super::status::{self, MapInfo, Status};
+use crate::report::{
+    Candidate, FeatureUse, ImageSize, Localization, MapIdentity, RuleReport, Timings,
+};
+use crate::search::StopInfo;
+use crate::search::stop::{RULES, rule_names};
+use std::sync::LazyLock;
+use utoipa::OpenApi;
+use utoipa::openapi::path::ParameterIn;
+use utoipa::openapi::schema::{ObjectBuilder, Type};
+
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "bowloc",
+        description = "Recognises a place from a picture: bag-of-words image search over a map of \
+                       images, with early-stopping rules that use only as many of the query's \
+                       features as needed."
+    ),
+    paths(
+        localize::localize,
+        status::healthz,
+        status::readyz,
+        status::map,
+        status::metrics,
+        status::openapi,
+    ),
+    components(schemas(
+        Localization, Candidate, FeatureUse, RuleReport, StopInfo, ImageSize, Timings,
+        MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload,
+    )),
+    tags(
+        (name = "localize", description = "Localize a query image against the loaded map."),
+        (name = "operations", description = "Health, readiness, metrics and descriptions."),
+    )
+)]
+struct ApiDoc;
+
+/// The document.
+pub fn document() -> utoipa::openapi::OpenApi {
+    let mut doc = ApiDoc::openapi();
+    describe_rules(&mut doc);
+    doc
+}
+
+/// The document as served and committed: pretty JSON and a final newline.
+pub fn json() -> &'static str {
+    static JSON: LazyLock<String> = LazyLock::new(|| {
+        let mut s = document()
+            .to_pretty_json()
+            .expect("the document serializes");
+        s.push('\n');
+        s
+    });
+    &JSON
+}
+
+/// The `rule` parameter of `/localize` lists the registry's rules.
+fn describe_rules(doc: &mut utoipa::openapi::OpenApi) {
+    let Some(op) = doc
+        .paths
+        .paths
+        .get_mut("/localize")
+        .and_then(|item| item.post.as_mut())
+    else {
+        return;
+    };
+    let rules: Vec<String> = RULES
+        .iter()
+        .map(|r| match r.parameter {
+            Some(p) => format!("`{}` ({p}): {}", r.name, r.about),
+            None => format!("`{}`: {}", r.name, r.about),
+        })
+        .collect();
+    for p in op.parameters.iter_mut().flatten() {
+        let utoipa::openapi::RefOr::T(p) = p else {
+            continue;
+        };
+        if p.name == "rule" && p.parameter_in == ParameterIn::Query {
+            p.description = Some(format!(
+                "Stopping rule (default from the configuration). Without a parameter it takes \
+                 the configured one if it is the configured rule.\n\n- {}",
+                rules.join("\n- ")
+            ));
+            p.schema = Some(
+                ObjectBuilder::new()
+                    .schema_type(Type::String)
+                    .enum_values(Some(rule_names()))
+                    .into(),
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rule_parameter_lists_every_rule() {
+        let v: serde_json::Value = serde_json::from_str(json()).unwrap();
+        let params = v["paths"]["/localize"]["post"]["parameters"]
+            .as_array()
+            .unwrap();
+        let rule = params.iter().find(|p| p["name"] == "rule").unwrap();
+        let listed: Vec<&str> = rule["schema"]["enum"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_str().unwrap())
+            .collect();
+        assert_eq!(listed, rule_names());
+        for name in [
+            "top_n",
+            "threshold",
+            "delta",
+            "fraction",
+            "seed",
+            "min_score",
+        ] {
+            assert!(
+                params.iter().any(|p| p["name"] == name),
+                "{name} undocumented"
+            );
+        }
+    }
+}

@@ -1,0 +1,97 @@
+//! The protobuf form of the answer, for clients that send
+//! `Accept: application/x-protobuf`: the types prost generates at build time
+//! from `proto/localize.proto`, and the conversion from
+//! [`report::Localization`](crate::report::Localization).
+
+use crate::report::Localization;
+use crate::search::StopKind;
+
+/// Generated from `proto/localize.proto` (package `bowloc.v1`).
+pub mod pb {
+    include!(concat!(env!("OUT_DIR"), "/bowloc.v1.rs"));
+}
+
+/// Media type of protobuf answers.
+pub const CONTENT_TYPE: &str = "application/x-protobuf";
+
+/// How a stop kind is spelled in answers (`rule`, `exhausted`, `deadline`):
+/// the JSON spelling, so both forms agree.
+pub fn stop_kind_name(kind: StopKind) -> String {
+    match serde_json::to_value(kind) {
+        Ok(serde_json::Value::String(s)) => s,
+        _ => format!("{kind:?}").to_lowercase(),
+    }
+}
+
+impl From<&Localization> for pb::Localization {
+    fn from(a: &Localization) -> Self {
+        Self {
+            candidates: a
+                .candidates
+                .iter()
+                .map(|c| pb::Candidate {
+                    rank: c.rank as u32,
+                    id: c.id,
+                    name: c.name.clone(),
+                    score: c.score,
+                    place: c.place.clone(),
+                    pose: c.pose.clone().unwrap_or_default(),
+                })
+                .collect(),
+            features: Some(pb::FeatureUse {
+                total: a.features.total as u64,
+                used: a.features.used as u64,
+                fraction: a.features.fraction,
+            }),
+            rule: Some(pb::Rule {
+                name: a.rule.name.clone(),
+                parameter: a.rule.parameter.map(str::to_owned),
+                value: a.rule.value,
+            }),
+            stop: Some(pb::Stop {
+                kind: stop_kind_name(a.stop.kind),
+                at_feature: a.stop.at_feature as u64,
+                detail: a.stop.detail.clone(),
+            }),
+            seed: a.seed,
+            image: Some(pb::ImageSize {
+                width: a.image.width,
+                height: a.image.height,
+            }),
+            timings_ms: Some(pb::Timings {
+                decode: a.timings_ms.decode,
+                extract: a.timings_ms.extract,
+                quantize: a.timings_ms.quantize,
+                vote: a.timings_ms.vote,
+                total: a.timings_ms.total,
+            }),
+            map: Some(pb::MapIdentity {
+                name: a.map.name.clone(),
+                images: a.map.images as u64,
+                words: a.map.words as u64,
+                vocabulary: a.map.vocabulary.clone(),
+            }),
+        }
+    }
+}
+
+/// Encode an answer.
+pub fn encode(answer: &Localization) -> Vec<u8> {
+    prost::Message::encode_to_vec(&pb::Localization::from(answer))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stop_kinds_are_spelled_as_in_json() {
+        for (kind, name) in [
+            (StopKind::Rule, "rule"),
+            (StopKind::Exhausted, "exhausted"),
+            (StopKind::Deadline, "deadline"),
+        ] {
+            assert_eq!(stop_kind_name(kind), name);
+        }
+    }
+}

@@ -1,0 +1,329 @@
+#!/usr/bin/env bash
+# End-to-end checks of `bowloc serve` with curl and jq: builds a small map
+# from the rtabmap-loop dataset in a temporary folder, starts the real server
+# on a free loopback port and checks every endpoint, the error paths and a
+# graceful shutdown. The last line is `N passed, M failed`; the exit status is
+# non-zero when anything failed.
+#
+# usage: tests/curl/run.sh [path/to/bowloc]
+#   (default: target/release/bowloc; datasets from $BOWLOC_TEST_DATASETS or
+#   ../shared/datasets beside the repository)
+set -uo pipefail
+
+ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
+BIN="${1:-$ROOT/target/release/bowloc}"
+DATASETS="${BOWLOC_TEST_DATASETS:-$ROOT/../shared/datasets}"
+RTAB="$DATASETS/rtabmap-loop"
+GARDENS="$DATASETS/gardens-point"
+# Measured: 43 of the 44 queries have a correct top candidate with this map
+# (1000 words, k-means seed 1, rule none, permutation seed 1); the floor
+# leaves a little slack.
+MIN_CORRECT=40
+
+passed=0
+failed=0
+ok() { passed=$((passed + 1)); echo "ok    $1"; }
+fail() { failed=$((failed + 1)); echo "FAIL  $1${2:+: $2}"; }
+check() { # check NAME COMMAND...: passes when the command succeeds
+  local name=$1; shift
+  if "$@"; then ok "$name"; else fail "$name"; fi
+}
+jqt() { jq -e "$@" >/dev/null; } # jqt FILTER FILE: the filter holds
+finish() {
+  echo "$passed passed, $failed failed"
+  [ "$failed" -eq 0 ]
+  exit $?
+}
+
+for tool in curl jq; do
+  command -v "$tool" >/dev/null || { echo "$tool is missing (scripts/setup.sh installs it)"; fail "tools"; finish; }
+done
+[ -x "$BIN" ] || { fail "binary" "$BIN is not executable"; finish; }
+[ -f "$RTAB/map.txt" ] || { fail "dataset" "$RTAB not found"; finish; }
+
+TMP="$(mktemp -d)"
+SERVER_PIDS=()
+cleanup() {
+  for pid in "${SERVER_PIDS[@]}"; do
+    kill -0 "$pid" 2>/dev/null && kill -KILL "$pid" 2>/dev/null
+  done
+  rm -rf "$TMP"
+}
+trap cleanup EXIT
+
+# --- a small map -------------------------------------------------------------
+if ! "$BIN" vocab build --images "$RTAB/map.txt" --words 1000 --seed 1 \
+      --out "$TMP/vocab.bowvoc" 2>"$TMP/build.log" \
+   || ! "$BIN" map build --vocab "$TMP/vocab.bowvoc" --images "$RTAB/map.txt" \
+      --out "$TMP/map.bowmap" --name rtabmap-loop 2>>"$TMP/build.log"; then
+  cat "$TMP/build.log"; fail "build map"; finish
+fi
+ok "build a map of rtabmap-loop"
+
+# write_config FILE WORKERS QUEUE DEADLINE_MS
+write_config() {
+  cat >"$1" <<TOML
+[server]
+listen = "127.0.0.1:0"
+workers = $2
+log_format = "human"
+[files]
+vocabulary = "$TMP/vocab.bowvoc"
+map = "$TMP/map.bowmap"
+[limits]
+body_bytes = 2000000
+queue = $3
+deadline_ms = $4
+[bootstrap]
+enabled = false
+TOML
+}
+
+# start_server CONFIG LOG: starts it, sets PID and BASE, waits for /readyz.
+start_server() {
+  "$BIN" serve --config "$1" >"$2" 2>&1 &
+  PID=$!
+  SERVER_PIDS+=("$PID")
+  local port="" i
+  for i in $(seq 1 100); do
+    port=$(grep -o 'listening on http://127.0.0.1:[0-9]*' "$2" | head -1 | sed 's/.*://')
+    [ -n "$port" ] && break
+    kill -0 "$PID" 2>/dev/null || break
+    sleep 0.1
+  done
+  [ -n "$port" ] || { cat "$2"; return 1; }
+  BASE="http://127.0.0.1:$port"
+  for i in $(seq 1 300); do
+    [ "$(curl -s -o /dev/null -w '%{http_code}' "$BASE/readyz")" = 200 ] && return 0
+    kill -0 "$PID" 2>/dev/null || break
+    sleep 0.1
+  done
+  cat "$2"
+  return 1
+}
+
+write_config "$TMP/config.toml" 2 8 10000
+if start_server "$TMP/config.toml" "$TMP/server.log"; then
+  ok "server starts and becomes ready ($BASE)"
+else
+  fail "server starts and becomes ready"; finish
+fi
+
+# req OUT ARGS...: curl, body to OUT, prints the status code.
+req() { local out=$1; shift; curl -s -o "$out" -w '%{http_code}' "$@"; }
+IMG="$RTAB/images/45.jpg"
+B="$TMP/body"
+
+# --- health, readiness, map, openapi -----------------------------------------
+check "GET /healthz is 200 alive" test "$(req "$B" "$BASE/healthz")/$(jq -r .status "$B")" = "200/alive"
+check "GET /readyz is 200 ready" test "$(req "$B" "$BASE/readyz")/$(jq -r .status "$B")" = "200/ready"
+check "GET /map names the loaded map" test \
+  "$(req "$B" "$BASE/map")/$(jq -r '.identity.name, .identity.images, .map.images' "$B" | paste -sd/)" = "200/rtabmap-loop/40/40"
+req "$TMP/openapi.json" "$BASE/openapi.json" >/dev/null
+check "GET /openapi.json equals docs/openapi.json" cmp -s "$TMP/openapi.json" "$ROOT/docs/openapi.json"
+
+# --- localization ------------------------------------------------------------
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?top_n=3&seed=7")
+check "raw upload is 200" test "$status" = 200
+check "answer has 3 ranked candidates" test "$(jq -r '[.candidates[].rank] | join(",")' "$B")" = "1,2,3"
+check "answer reports features, rule, stop, seed, timings, map" jqt '
+  .features.total > 0 and .features.used <= .features.total and .features.fraction > 0
+  and .rule.name == "none" and (.stop.kind | IN("rule","exhausted","deadline"))
+  and .stop.at_feature == .features.used and .seed == 7
+  and .timings_ms.total > 0 and .timings_ms.extract > 0
+  and .map.name == "rtabmap-loop" and .map.images == 40 and .map.words == 1000
+  and (.map.vocabulary | length) == 16 and .image.width == 512' "$B"
+cp "$B" "$TMP/first.json"
+req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?top_n=3&seed=7" >/dev/null
+check "same seed gives the same candidates" test \
+  "$(jq -c '[.candidates[] | [.id, .score]]' "$B")" = "$(jq -c '[.candidates[] | [.id, .score]]' "$TMP/first.json")"
+status=$(req "$B" -F "image=@$IMG" "$BASE/localize?top_n=3&seed=7")
+check "multipart upload gives the same answer" test \
+  "$status/$(jq -c '[.candidates[].id]' "$B")" = "200/$(jq -c '[.candidates[].id]' "$TMP/first.json")"
+status=$(req "$B" -H 'Content-Type: application/octet-stream' --data-binary @"$IMG" "$BASE/localize")
+check "application/octet-stream is accepted" test "$status" = 200
+s1=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize"; jq -r .seed "$B")
+s2=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize"; jq -r .seed "$B")
+check "without a seed each request draws its own" test "$s1" != "$s2"
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=fixed&fraction=0.5&seed=1")
+check "rule fixed 0.5 uses half the features" jqt --arg s "$status" '
+  $s == "200" and .rule.name == "fixed" and .rule.parameter == "fraction" and .rule.value == 0.5
+  and .stop.kind == "rule" and .features.used == ((.features.total / 2) | ceil)' "$B"
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=hoeffding&delta=0.1&min_score=1000")
+check "min_score drops every candidate" test "$status/$(jq '.candidates | length' "$B")" = "200/0"
+
+# A flat grey image has no SIFT features: a 200 answer with no candidates.
+{ printf 'P5\n64 64\n255\n'; head -c 4096 /dev/zero | tr '\0' '\200'; } >"$TMP/flat.pgm"
+status=$(req "$B" -H 'Content-Type: image/x-portable-graymap' --data-binary @"$TMP/flat.pgm" "$BASE/localize")
+check "image without features is 200 with no candidates" jqt --arg s "$status" '
+  $s == "200" and .candidates == [] and .features.total == 0 and .features.used == 0
+  and .stop.kind == "exhausted"' "$B"
+
+# Every query of the dataset against the map: is the top candidate correct?
+correct=0
+total=0
+while read -r query; do
+  [ -n "$query" ] || continue
+  total=$((total + 1))
+  req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$RTAB/$query" "$BASE/localize?top_n=1&seed=1" >/dev/null
+  top=$(jq -r '.candidates[0].name // ""' "$B")
+  grep -qxF "$query,$top" "$RTAB/ground_truth.csv" && correct=$((correct + 1))
+done <"$RTAB/queries.txt"
+echo "      top candidate correct for $correct of $total queries (floor $MIN_CORRECT)"
+check "real queries localize ($correct of $total correct, floor $MIN_CORRECT)" test "$correct" -ge "$MIN_CORRECT"
+
+# --- protobuf ----------------------------------------------------------------
+ctype=$(curl -s -o "$TMP/answer.pb" -w '%{http_code} %{content_type}' -H 'Accept: application/x-protobuf' \
+  -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?seed=7")
+check "Accept: application/x-protobuf answers protobuf" test "$ctype" = "200 application/x-protobuf"
+check "protobuf body is not empty and holds the map name" grep -q rtabmap-loop "$TMP/answer.pb"
+
+# --- request ids -------------------------------------------------------------
+check "x-request-id is echoed" sh -c "curl -s -D - -o /dev/null -H 'x-request-id: suite-42' '$BASE/healthz' | grep -qi '^x-request-id: suite-42'"
+check "x-request-id is generated when absent" sh -c "curl -s -D - -o /dev/null '$BASE/healthz' | grep -qiE '^x-request-id: [0-9a-f-]{36}'"
+check "the request log line carries id, status, latency and fraction" \
+  grep -qE 'request_id=suite-42 .*status=200 latency_ms=' "$TMP/server.log"
+check "a localize log line carries the fraction used" grep -qE 'route="/localize" status=200 latency_ms=[0-9.]+ fraction_used=' "$TMP/server.log"
+
+# --- error paths: status, code, and the server still answers ------------------
+# expect NAME STATUS CODE CURL-ARGS...
+expect() {
+  local name=$1 want_status=$2 want_code=$3; shift 3
+  local status code alive
+  status=$(req "$B" "$@")
+  code=$(jq -r '.error.code // empty' "$B" 2>/dev/null)
+  alive=$(curl -s -o /dev/null -w '%{http_code}' "$BASE/healthz")
+  if [ "$status/$code/$alive" = "$want_status/$want_code/200" ]; then
+    ok "$name → $status $code"
+  else
+    fail "$name" "got $status/$code (server alive: $alive), want $want_status/$want_code; body: $(head -c 300 "$B")"
+  fi
+}
+JPEG=(-H 'Content-Type: image/jpeg')
+echo "not an image" >"$TMP/text.jpg"
+head -c 300 "$IMG" >"$TMP/cut-in-header.jpg"
+head -c 3000000 /dev/urandom >"$TMP/big.bin"
+# A PNG header declaring 50000×50000 pixels (a decompression bomb's header).
+printf '\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR\x00\x00\xc3\x50\x00\x00\xc3\x50\x08\x00\x00\x00\x00\x00\x00\x00\x00' >"$TMP/bomb.png"
+
+expect "empty body" 400 empty_body "${JPEG[@]}" --data-binary '' "$BASE/localize"
+expect "not an image" 422 undecodable_image "${JPEG[@]}" --data-binary @"$TMP/text.jpg" "$BASE/localize"
+expect "JPEG cut inside its header" 422 undecodable_image "${JPEG[@]}" --data-binary @"$TMP/cut-in-header.jpg" "$BASE/localize"
+expect "decompression bomb (50000x50000 PNG header)" 422 image_too_large -H 'Content-Type: image/png' --data-binary @"$TMP/bomb.png" "$BASE/localize"
+expect "body over the limit" 413 body_too_large "${JPEG[@]}" --data-binary @"$TMP/big.bin" "$BASE/localize"
+expect "multipart body over the limit" 413 body_too_large -F "image=@$TMP/big.bin" "$BASE/localize"
+expect "wrong content type" 415 unsupported_media_type -H 'Content-Type: text/plain' --data-binary @"$IMG" "$BASE/localize"
+expect "form-urlencoded (curl's default)" 415 unsupported_media_type --data-binary @"$IMG" "$BASE/localize"
+expect "multipart without an image field" 400 missing_image_field -F "photo=@$IMG" "$BASE/localize"
+expect "unknown rule" 400 unknown_rule "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=fastest"
+expect "top_n=0" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?top_n=0"
+expect "top_n huge" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?top_n=99999999999999999999"
+expect "threshold=NaN" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=peak-mean&threshold=NaN"
+expect "threshold=-1" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=peak-mean&threshold=-1"
+expect "threshold=abc" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=peak-mean&threshold=abc"
+expect "rule needing a parameter without one" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=hoeffding"
+expect "seed=abc" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?seed=abc"
+expect "unknown query parameter" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?top_k=3"
+expect "unknown route" 404 not_found "$BASE/nowhere"
+expect "wrong method" 405 method_not_allowed "$BASE/localize"
+
+# A JPEG cut after its header decodes as far as the data goes (libjpeg fills
+# the rest): a defined 200 answer on the part that arrived.
+head -c 10000 "$IMG" >"$TMP/cut-in-data.jpg"
+status=$(req "$B" "${JPEG[@]}" --data-binary @"$TMP/cut-in-data.jpg" "$BASE/localize")
+check "JPEG cut in its data is answered from what arrived" test "$status/$(jq -r .image.width "$B")" = "200/512"
+
+# --- metrics -----------------------------------------------------------------
+metric() { # metric NAME{LABELS}: its value in a fresh scrape (0 if absent)
+  curl -s "$BASE/metrics" | awk -v k="$1" '$1 == k { v = $2 } END { print v + 0 }'
+}
+ok200='bowloc_http_requests_total{route="/localize",method="POST",status="200"}'
+total_count='bowloc_localize_stage_duration_seconds_count{stage="total"}'
+rejected='bowloc_rejected_requests_total{reason="unknown_rule"}'
+before=$(metric "$ok200"); stages_before=$(metric "$total_count"); rejected_before=$(metric "$rejected")
+req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize" >/dev/null
+req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=fastest" >/dev/null
+check "requests counter moves" test "$(metric "$ok200")" -eq $((before + 1))
+check "stage latency histogram moves" test "$(metric "$total_count")" -eq $((stages_before + 1))
+check "rejected counter moves by reason" test "$(metric "$rejected")" -eq $((rejected_before + 1))
+curl -s "$BASE/metrics" >"$TMP/metrics.txt"
+for name in bowloc_http_request_duration_seconds_bucket bowloc_localize_features_used_fraction_bucket \
+  bowloc_localize_query_features_bucket bowloc_http_requests_in_flight bowloc_map_images \
+  bowloc_map_words bowloc_workers_busy bowloc_queue_waiting bowloc_localize_stops_total; do
+  check "metrics export $name" grep -q "^$name" "$TMP/metrics.txt"
+done
+check "metrics is Prometheus text" sh -c "curl -s -D - -o /dev/null '$BASE/metrics' | grep -qi '^content-type: text/plain; version=0.0.4'"
+check "map gauge holds the map size" grep -qx 'bowloc_map_images 40' "$TMP/metrics.txt"
+
+# --- graceful shutdown: a request in flight finishes, exit status 0 -----------
+BIG="$GARDENS/day_left/Image000.jpg"
+[ -f "$BIG" ] || BIG="$IMG"
+seen_busy=no
+for attempt in 1 2 3 4 5; do
+  curl -s -o "$TMP/inflight.json" -w '%{http_code}' "${JPEG[@]}" --data-binary @"$BIG" "$BASE/localize" >"$TMP/inflight.status" &
+  CURL=$!
+  for i in $(seq 1 200); do
+    if [ "$(metric bowloc_workers_busy)" -ge 1 ]; then seen_busy=yes; break; fi
+    kill -0 "$CURL" 2>/dev/null || break
+  done
+  [ "$seen_busy" = yes ] && break
+  wait "$CURL"
+done
+kill -TERM "$PID"
+if [ "$seen_busy" = yes ]; then
+  wait "$CURL"
+  check "request in flight at SIGTERM completes" test "$(cat "$TMP/inflight.status")" = 200
+else
+  fail "request in flight at SIGTERM completes" "never caught a request in flight"
+fi
+wait "$PID"
+rc=$?
+check "SIGTERM stops the server with exit status 0" test "$rc" = 0
+check "shutdown is logged" grep -q 'stopped' "$TMP/server.log"
+
+# --- a second server: deadline and overload ----------------------------------
+write_config "$TMP/tight.toml" 1 0 1
+if start_server "$TMP/tight.toml" "$TMP/tight.log"; then
+  ok "server with a 1 ms deadline starts"
+  status=$(req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize")
+  check "a search past its deadline returns the answer so far" jqt --arg s "$status" '
+    $s == "200" and .stop.kind == "deadline" and .features.used < .features.total' "$B"
+  # One worker, no queue: of requests sent at once, those beyond the first
+  # running are refused with 503 and Retry-After, never queued.
+  curls=()
+  for i in 1 2 3 4 5 6; do
+    curl -s -D "$TMP/h$i" -o "$TMP/b$i" -w '%{http_code}' "${JPEG[@]}" --data-binary @"$BIG" "$BASE/localize" >"$TMP/s$i" &
+    curls+=($!)
+  done
+  wait "${curls[@]}"
+  refused=0; answered=0; bad=0
+  for i in 1 2 3 4 5 6; do
+    case "$(cat "$TMP/s$i")" in
+      200) answered=$((answered + 1)) ;;
+      503) if [ "$(jq -r .error.code "$TMP/b$i")" = overloaded ] && grep -qi '^retry-after: 1' "$TMP/h$i"; then
+             refused=$((refused + 1)); else bad=$((bad + 1)); fi ;;
+      *) bad=$((bad + 1)) ;;
+    esac
+  done
+  check "overload: $answered answered, $refused refused with 503 overloaded + Retry-After" \
+    test "$answered" -ge 1 -a "$refused" -ge 1 -a "$bad" -eq 0
+  kill -TERM "$PID"; wait "$PID"
+  check "second server exits 0" test $? = 0
+else
+  fail "server with a 1 ms deadline starts"
+fi
+
+# --- start-up errors name the key --------------------------------------------
+printf '[search]\ntop_m = 3\n' >"$TMP/bad.toml"
+out=$("$BIN" serve --config "$TMP/bad.toml" 2>&1); rc=$?
+check "unknown config key stops start-up naming it" test "$rc" != 0 -a -n "$(echo "$out" | grep top_m)"
+out=$(BOWLOC_LIMITS__QUEUE=lots "$BIN" serve --config "$TMP/config.toml" 2>&1); rc=$?
+check "bad environment value stops start-up naming the key" test "$rc" != 0 -a -n "$(echo "$out" | grep -i queue)"
+
+# --- the container's runtime libraries ---------------------------------------
+if command -v dpkg >/dev/null && command -v ldd >/dev/null; then
+  check "Dockerfile runtime packages provide every library the binary links" \
+    bash "$ROOT/scripts/check-docker-runtime.sh" "$BIN"
+fi
+
+finish

@@ -1,0 +1,214 @@
+//! The HTTP service in-process (the router driven with `tower::oneshot`),
+//! where finer control helps: protobuf answers decoded with prost and
+//! compared with the JSON answer, the served OpenAPI document against the
+//! committed one, and the not-ready state before the map is loaded.
+
+use axum::body::Body;
+use axum::http::{Request, StatusCode, header};
+use bowloc::dataset::image_list;
+use bowloc::pipeline::{Localizer, build_map, build_vocabulary};
+use bowloc::server::config::Config;
+use bowloc::server::proto::pb;
+use bowloc::server::{AppState, openapi, router};
+use bowloc::vocabulary::kmeans::KmeansConfig;
+use prost::Message;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, OnceLock};
+use tower::ServiceExt;
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn rtab() -> PathBuf {
+    root().join("../shared/datasets/rtabmap-loop")
+}
+
+/// A small vocabulary and map from the first 12 map images of rtabmap-loop,
+/// built once for all tests of this file.
+fn files() -> &'static (PathBuf, PathBuf) {
+    static FILES: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
+    FILES.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap().keep();
+        let images: Vec<_> = image_list(&rtab().join("map.txt"))
+            .unwrap()
+            .into_iter()
+            .take(12)
+            .collect();
+        let kmeans = KmeansConfig {
+            k: 200,
+            seed: 1,
+            ..Default::default()
+        };
+        let vocab = build_vocabulary(&images, &Default::default(), &kmeans, true).unwrap();
+        let map = build_map(&vocab, &images, None, "rtab-12", true).unwrap();
+        let (v, m) = (dir.join("v.bowvoc"), dir.join("m.bowmap"));
+        vocab.save(&v).unwrap();
+        map.save(&m).unwrap();
+        (v, m)
+    })
+}
+
+fn state(loaded: bool) -> Arc<AppState> {
+    let (v, m) = files();
+    let mut config = Config::default();
+    config.files.vocabulary = v.clone();
+    config.files.map = m.clone();
+    config.bootstrap.enabled = false;
+    config.server.workers = 1;
+    let state = AppState::new(config).unwrap();
+    if loaded {
+        state.set_localizer(Localizer::open(v, m, true).unwrap());
+    }
+    state
+}
+
+async fn send(
+    state: &Arc<AppState>,
+    request: Request<Body>,
+) -> (StatusCode, header::HeaderMap, Vec<u8>) {
+    let response = router(state.clone()).oneshot(request).await.unwrap();
+    let (parts, body) = response.into_parts();
+    let bytes = axum::body::to_bytes(body, 1 << 24).await.unwrap();
+    (parts.status, parts.headers, bytes.to_vec())
+}
+
+fn localize(query: &str, accept: &str) -> Request<Body> {
+    let image = std::fs::read(rtab().join("images/5.jpg")).unwrap();
+    Request::post(format!("/localize?{query}"))
+        .header(header::CONTENT_TYPE, "image/jpeg")
+        .header(header::ACCEPT, accept)
+        .body(Body::from(image))
+        .unwrap()
+}
+
+#[tokio::test]
+async fn protobuf_answer_carries_the_json_answer() {
+    let state = state(true);
+    let (status, headers, json) =
+        send(&state, localize("seed=3&top_n=4", "application/json")).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(headers[header::CONTENT_TYPE], "application/json");
+    let json: serde_json::Value = serde_json::from_slice(&json).unwrap();
+
+    let (status, headers, bytes) =
+        send(&state, localize("seed=3&top_n=4", "application/x-protobuf")).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(headers[header::CONTENT_TYPE], "application/x-protobuf");
+    let pb = pb::Localization::decode(bytes.as_slice()).expect("a valid protobuf message");
+
+    assert!(!pb.candidates.is_empty());
+    assert_eq!(
+        pb.candidates.len(),
+        json["candidates"].as_array().unwrap().len()
+    );
+    for (p, j) in pb
+        .candidates
+        .iter()
+        .zip(json["candidates"].as_array().unwrap())
+    {
+        assert_eq!(p.rank as u64, j["rank"].as_u64().unwrap());
+        assert_eq!(p.id as u64, j["id"].as_u64().unwrap());
+        assert_eq!(p.name, j["name"].as_str().unwrap());
+        assert!((p.score as f64 - j["score"].as_f64().unwrap()).abs() < 1e-6);
+    }
+    // Image 5.jpg is map image 4: with the same seed it must come first.
+    assert_eq!(pb.candidates[0].name, "images/5.jpg");
+    let f = pb.features.unwrap();
+    assert_eq!(f.total, json["features"]["total"].as_u64().unwrap());
+    assert_eq!(f.used, json["features"]["used"].as_u64().unwrap());
+    assert_eq!(
+        pb.rule.unwrap().name,
+        json["rule"]["name"].as_str().unwrap()
+    );
+    let stop = pb.stop.unwrap();
+    assert_eq!(stop.kind, json["stop"]["kind"].as_str().unwrap());
+    assert_eq!(
+        stop.at_feature,
+        json["stop"]["at_feature"].as_u64().unwrap()
+    );
+    assert_eq!(pb.seed, 3);
+    let map = pb.map.unwrap();
+    assert_eq!(
+        (map.name.as_str(), map.images, map.words),
+        ("rtab-12", 12, 200)
+    );
+    assert_eq!(map.vocabulary, json["map"]["vocabulary"].as_str().unwrap());
+    assert_eq!(pb.image.unwrap().width, 512);
+    assert!(pb.timings_ms.unwrap().total > 0.0);
+}
+
+#[tokio::test]
+async fn rule_parameter_is_reported_in_protobuf() {
+    let state = state(true);
+    let (status, _, bytes) = send(
+        &state,
+        localize("rule=hoeffding&delta=0.2&seed=1", "application/x-protobuf"),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK);
+    let rule = pb::Localization::decode(bytes.as_slice())
+        .unwrap()
+        .rule
+        .unwrap();
+    assert_eq!(rule.name, "hoeffding");
+    assert_eq!(rule.parameter.as_deref(), Some("delta"));
+    assert_eq!(rule.value, Some(0.2));
+}
+
+#[tokio::test]
+async fn errors_stay_json_for_protobuf_clients() {
+    let state = state(true);
+    let (status, headers, body) = send(&state, localize("top_n=0", "application/x-protobuf")).await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
+    assert_eq!(headers[header::CONTENT_TYPE], "application/json");
+    let v: serde_json::Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(v["error"]["code"], "invalid_parameter");
+    assert!(v["error"]["message"].as_str().unwrap().contains("top_n"));
+}
+
+#[tokio::test]
+async fn served_openapi_equals_the_committed_document() {
+    let committed = std::fs::read_to_string(root().join("docs/openapi.json")).unwrap();
+    assert!(
+        openapi::json() == committed,
+        "docs/openapi.json is out of date: regenerate it with \
+         `cargo run --release -- openapi > docs/openapi.json`"
+    );
+    let state = state(false);
+    let (status, headers, body) = send(
+        &state,
+        Request::get("/openapi.json").body(Body::empty()).unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(headers[header::CONTENT_TYPE], "application/json");
+    assert_eq!(String::from_utf8(body).unwrap(), committed);
+}
+
+#[tokio::test]
+async fn before_the_map_is_loaded_only_liveness_answers() {
+    let state = state(false);
+    let get = |path: &str| Request::get(path).body(Body::empty()).unwrap();
+    let (status, _, _) = send(&state, get("/healthz")).await;
+    assert_eq!(status, StatusCode::OK);
+    for request in [
+        get("/readyz"),
+        get("/map"),
+        localize("", "application/json"),
+    ] {
+        let (status, headers, body) = send(&state, request).await;
+        assert_eq!(status, StatusCode::SERVICE_UNAVAILABLE);
+        assert!(headers.contains_key(header::RETRY_AFTER));
+        let v: serde_json::Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(v["error"]["code"], "not_ready");
+    }
+    state.set_localizer(Localizer::open(&files().0, &files().1, false).unwrap());
+    let (status, _, _) = send(&state, get("/readyz")).await;
+    assert_eq!(status, StatusCode::OK);
+    state.begin_shutdown();
+    let (status, _, body) = send(&state, get("/readyz")).await;
+    assert_eq!(status, StatusCode::SERVICE_UNAVAILABLE);
+    let v: serde_json::Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(v["error"]["code"], "shutting_down");
+}
