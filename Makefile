@@ -1,5 +1,5 @@
 # The two quick-start commands: `make run` and `make test`.
-.PHONY: setup build run test bench
+.PHONY: setup build run test bench openapi
 
 setup:
 	@bash scripts/setup.sh
@@ -17,3 +17,7 @@ test: setup
 
 bench: setup
 	cargo bench
+
+# Regenerate the committed API document after changing the API.
+openapi: build
+	./target/release/bowloc openapi > docs/openapi.json

@@ -11,7 +11,7 @@ fn curl_suite() {
     let output = Command::new("bash")
         .arg(root.join("tests/curl/run.sh"))
         .arg(env!("CARGO_BIN_EXE_bowloc"))
-        .env("BOWLOC_TEST_DATASETS", &datasets)
+        .arg(&datasets)
         .env_remove("RUST_LOG")
         .output()
         .expect("bash runs");

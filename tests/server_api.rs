@@ -172,8 +172,7 @@ async fn served_openapi_equals_the_committed_document() {
     let committed = std::fs::read_to_string(root().join("docs/openapi.json")).unwrap();
     assert!(
         openapi::json() == committed,
-        "docs/openapi.json is out of date: regenerate it with \
-         `cargo run --release -- openapi > docs/openapi.json`"
+        "docs/openapi.json is out of date: regenerate it with `make openapi`"
     );
     let state = state(false);
     let (status, headers, body) = send(

@@ -38,9 +38,7 @@ pub async fn healthz() -> Json<Status> {
     ))]
 pub async fn readyz(State(state): State<Arc<AppState>>) -> Result<Json<Status>, ApiError> {
     if state.is_shutting_down() {
-        let mut e = ApiError::not_ready("the service is shutting down");
-        e.code = "shutting_down";
-        return Err(e);
+        return Err(ApiError::shutting_down());
     }
     state.localizer()?;
     Ok(Json(Status { status: "ready" }))

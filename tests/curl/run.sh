@@ -5,14 +5,16 @@
 # graceful shutdown. The last line is `N passed, M failed`; the exit status is
 # non-zero when anything failed.
 #
-# usage: tests/curl/run.sh [path/to/bowloc]
-#   (default: target/release/bowloc; datasets from $BOWLOC_TEST_DATASETS or
-#   ../shared/datasets beside the repository)
+# usage: tests/curl/run.sh [path/to/bowloc [path/to/datasets]]
+#   (defaults: target/release/bowloc and ../shared/datasets beside the
+#   repository)
 set -uo pipefail
 
 ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
 BIN="${1:-$ROOT/target/release/bowloc}"
-DATASETS="${BOWLOC_TEST_DATASETS:-$ROOT/../shared/datasets}"
+DATASETS="${2:-$ROOT/../shared/datasets}"
+# The servers started here read only the configuration written here.
+for v in $(compgen -e | grep '^BOWLOC_'); do unset "$v"; done
 RTAB="$DATASETS/rtabmap-loop"
 GARDENS="$DATASETS/gardens-point"
 # Measured: 43 of the 44 queries have a correct top candidate with this map
