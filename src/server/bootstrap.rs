@@ -35,6 +35,7 @@ pub fn load(config: &Config) -> anyhow::Result<Localizer> {
     localizer.limits = DecodeLimits {
         max_pixels: config.limits.pixels,
     };
+    localizer.quantizer = config.quantizer().map_err(anyhow::Error::msg)?;
     let cap = config.limits.max_features;
     let sift = &mut localizer.extract.sift;
     if cap > 0 && (sift.max_features == 0 || sift.max_features > cap) {

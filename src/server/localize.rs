@@ -49,6 +49,11 @@ pub struct LocalizeParams {
     /// Drop candidates scoring below this (≥ 0).
     #[param(value_type = Option<f32>)]
     pub min_score: Option<String>,
+    /// Features voted before the rule is first consulted (the warm-up).
+    /// Defaults to the configured warm-up when the request uses the configured
+    /// rule, to 0 when it names another.
+    #[param(value_type = Option<u32>, minimum = 0)]
+    pub min_features: Option<String>,
 }
 
 /// What a request may ask for within the configuration.
@@ -70,6 +75,15 @@ impl LocalizeParams {
     pub fn options(&self, defaults: &Defaults) -> Result<SearchOptions, ApiError> {
         let mut o = defaults.options.clone();
         o.rule = self.rule(&defaults.options.rule)?;
+        if o.rule.name != defaults.options.rule.name {
+            // the configured warm-up belongs to the configured rule
+            o.min_features = 0;
+        }
+        if let Some(v) = &self.min_features {
+            o.min_features = v.trim().parse().map_err(|_| {
+                ApiError::invalid_parameter("min_features", format!("`{v}` is not a whole number"))
+            })?;
+        }
         if let Some(v) = &self.top_n {
             let n: usize = v.trim().parse().map_err(|_| {
                 ApiError::invalid_parameter("top_n", format!("`{v}` is not a whole number"))
