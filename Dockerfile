@@ -9,7 +9,7 @@
 # The image holds no map: mount one (as above), or mount a dataset folder at
 # /datasets/gardens-point to let the service bootstrap one into /data/default.
 
-FROM rust:1.88-bookworm AS build
+FROM rust:1.95-bookworm AS build
 RUN apt-get update \
  && apt-get install -y --no-install-recommends libopencv-dev clang libclang-dev \
  && rm -rf /var/lib/apt/lists/*

@@ -65,7 +65,11 @@ fn summary(images: &[Vec<u8>]) {
     let c = &c;
     std::thread::scope(|s| {
         for half in images.chunks(images.len().div_ceil(2)) {
-            s.spawn(move || half.iter().for_each(|i| drop(extract_ms(i, c))));
+            s.spawn(move || {
+                half.iter().for_each(|i| {
+                    extract_ms(i, c);
+                })
+            });
         }
     });
     let requests2 = n / start.elapsed().as_secs_f64();

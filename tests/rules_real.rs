@@ -3,6 +3,7 @@
 //! - `lossless` returns exactly the top-n of full bag-of-words;
 //! - `confident` agrees with full bag-of-words' top-1 on at least 1 − δ of
 //!   the (query, seed) pairs.
+//!
 //! Each query is quantized once and voted many times (`search_words`).
 
 use bowloc::dataset::Dataset;

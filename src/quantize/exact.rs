@@ -52,7 +52,10 @@ impl ExactQuantizer {
 
     /// Pack for a given kernel (benchmarks and tests compare them).
     pub fn with_kernel(centroids: &[f32], dim: usize, kernel: Kernel) -> Self {
-        assert!(dim > 0 && centroids.len() % dim == 0, "K × dim centroids");
+        assert!(
+            dim > 0 && centroids.len().is_multiple_of(dim),
+            "K × dim centroids"
+        );
         assert!(
             kernel.available(),
             "{kernel:?} is not supported on this CPU"

@@ -169,6 +169,7 @@ pub fn gemm_block(
 }
 
 #[cfg(target_arch = "x86_64")]
+#[allow(clippy::needless_range_loop)] // register tiles indexed in lock-step
 mod x86 {
     use super::LANES;
     use std::arch::x86_64::*;

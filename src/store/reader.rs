@@ -93,8 +93,8 @@ impl Store {
             let len = u64_at(entry, NAME_LEN + 16);
             let end = offset.checked_add(len);
             if end.is_none_or(|end| end > map.len() as u64)
-                || offset % ALIGN as u64 != 0
-                || len % dtype.size() as u64 != 0
+                || !offset.is_multiple_of(ALIGN as u64)
+                || !len.is_multiple_of(dtype.size() as u64)
             {
                 return Err(corrupt(format!(
                     "section '{name}' (offset {offset}, {len} bytes) does not fit a {} byte file",

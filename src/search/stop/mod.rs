@@ -39,6 +39,9 @@ impl Default for RuleContext {
     }
 }
 
+/// Builds a rule instance from its parameter, or says why the value is refused.
+pub type MakeRule = fn(f64, &RuleContext) -> Result<Box<dyn StopRule>, String>;
+
 /// A rule's entry in the registry.
 pub struct RuleInfo {
     /// Name used in the CLI, the API and the config.
@@ -48,7 +51,7 @@ pub struct RuleInfo {
     /// One line for help texts.
     pub about: &'static str,
     /// Check a parameter value and build an instance.
-    pub make: fn(f64, &RuleContext) -> Result<Box<dyn StopRule>, String>,
+    pub make: MakeRule,
 }
 
 /// Every rule bowloc knows.
