@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# Drive a real `bowloc serve` on loopback with wrk and report requests per
+# second, latency percentiles, refused (non-2xx) requests and the server's
+# memory before and after. Bounded in time; the server is stopped at the end.
+#
+#   scripts/load.sh [WORKERS] [CONNECTIONS] [SECONDS] [QUEUE]
+#
+# Defaults: 2 workers, 8 connections, 20 s, queue 32. The map is rtabmap-loop
+# (K = 1000), built into data/load/ on first use; the image is one of its
+# queries. Run it on a quiet machine: every figure depends on the CPU.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+workers=${1:-2}
+connections=${2:-8}
+seconds=${3:-20}
+queue=${4:-32}
+command -v wrk >/dev/null || { echo "wrk missing: apt-get install wrk" >&2; exit 1; }
+bin=./target/release/bowloc
+[ -x "$bin" ] || cargo build --release
+data=../shared/datasets/rtabmap-loop
+mkdir -p data/load
+if [ ! -f data/load/map.bowmap ]; then
+  $bin --log warn vocab build --images $data/map.txt --words 1000 --seed 1 --out data/load/vocab.bowvoc
+  $bin --log warn map build --vocab data/load/vocab.bowvoc --images $data/map.txt --out data/load/map.bowmap
+fi
+tmp=$(mktemp -d)
+cat >"$tmp/config.toml" <<TOML
+[server]
+listen = "127.0.0.1:0"
+workers = $workers
+[files]
+vocabulary = "data/load/vocab.bowvoc"
+map = "data/load/map.bowmap"
+[limits]
+queue = $queue
+[bootstrap]
+enabled = false
+TOML
+$bin serve --config "$tmp/config.toml" >"$tmp/server.log" 2>&1 &
+pid=$!
+trap 'kill $pid 2>/dev/null; wait $pid 2>/dev/null; rm -rf "$tmp"' EXIT
+for _ in $(seq 100); do
+  addr=$(grep -o 'listening.*127\.0\.0\.1:[0-9]*' "$tmp/server.log" | grep -o '127\.0\.0\.1:[0-9]*' | head -1 || true)
+  [ -n "$addr" ] && curl -sf "http://$addr/readyz" >/dev/null && break
+  sleep 0.1
+done
+[ -n "${addr:-}" ] || { cat "$tmp/server.log"; echo "server did not start" >&2; exit 1; }
+rss() { awk '/VmRSS/ {print $2}' /proc/$pid/status; }
+cat >"$tmp/post.lua" <<LUA
+local f = io.open("$data/images/50.jpg", "rb")
+wrk.method = "POST"
+wrk.body = f:read("*all")
+f:close()
+wrk.headers["Content-Type"] = "image/jpeg"
+LUA
+before=$(rss)
+wrk -t 2 -c "$connections" -d "${seconds}s" --latency -s "$tmp/post.lua" "http://$addr/localize" >"$tmp/wrk.txt"
+after=$(rss)
+rps=$(awk '/Requests\/sec/ {print $2}' "$tmp/wrk.txt")
+total=$(awk '/requests in/ {print $1}' "$tmp/wrk.txt")
+refused=$(awk '/Non-2xx/ {print $NF}' "$tmp/wrk.txt")
+p50=$(awk '$1=="50%" {print $2}' "$tmp/wrk.txt")
+p99=$(awk '$1=="99%" {print $2}' "$tmp/wrk.txt")
+echo "workers=$workers connections=$connections seconds=$seconds queue=$queue"
+echo "requests=$total refused_non_2xx=${refused:-0} requests_per_s=$rps latency_p50=$p50 latency_p99=$p99"
+echo "server_rss_kib_before=$before server_rss_kib_after=$after"
