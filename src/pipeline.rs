@@ -189,6 +189,19 @@ pub fn quantize_all(quantizer: &dyn Quantizer, descriptors: ArrayView2<'_, f32>)
     words
 }
 
+/// The words of each image's descriptors, exactly quantized (`None`, an
+/// unreadable image, gives no words).
+pub fn words_per_image(vocab: &Vocabulary, descriptors: &[Option<Descriptors>]) -> Vec<Vec<u32>> {
+    descriptors
+        .iter()
+        .map(|d| {
+            d.as_ref()
+                .map(|d| quantize_all(vocab.exact_quantizer(), d.view()))
+                .unwrap_or_default()
+        })
+        .collect()
+}
+
 /// Build a map from per-image descriptors (`None`: unreadable image, kept as
 /// an image without features so ids stay equal to list order).
 pub fn index_descriptors(

@@ -8,7 +8,7 @@
 
 use bowloc::dataset::Dataset;
 use bowloc::features::{DecodeLimits, ExtractConfig};
-use bowloc::pipeline::{extract_all, index_descriptors, quantize_all, stack, train_vocabulary};
+use bowloc::pipeline::{extract_all, index_descriptors, stack, train_vocabulary, words_per_image};
 use bowloc::search::{RuleSpec, SearchOptions, search_words};
 use bowloc::vocabulary::kmeans::KmeansConfig;
 use std::path::PathBuf;
@@ -37,14 +37,7 @@ fn prepare(dataset: &str, words: usize) -> Prepared {
     let names: Vec<String> = data.map.iter().map(|i| i.name.clone()).collect();
     let map = index_descriptors(&vocab, &names, &map_desc, None, dataset);
     let query_desc = extract_all(&data.queries, &extract, limits, false, "queries").unwrap();
-    let queries = query_desc
-        .iter()
-        .map(|d| {
-            d.as_ref()
-                .map(|d| quantize_all(vocab.exact_quantizer(), d.view()))
-                .unwrap_or_default()
-        })
-        .collect();
+    let queries = words_per_image(&vocab, &query_desc);
     Prepared {
         name: dataset.to_owned(),
         map,

@@ -9,7 +9,7 @@ use bowloc::dataset::Dataset;
 use bowloc::eval::sweep::{Setting, search_one, seed};
 use bowloc::features::DecodeLimits;
 use bowloc::index::MapIndex;
-use bowloc::pipeline::{extract_all, quantize_all};
+use bowloc::pipeline::{extract_all, words_per_image};
 use bowloc::search::RuleSpec;
 use bowloc::vocabulary::Vocabulary;
 use clap::Args;
@@ -167,14 +167,7 @@ fn real_queries(
         false,
         "queries",
     )?;
-    let words = desc
-        .iter()
-        .map(|d| {
-            d.as_ref()
-                .map(|d| quantize_all(vocab.exact_quantizer(), d.view()))
-                .unwrap_or_default()
-        })
-        .collect();
+    let words = words_per_image(vocab, &desc);
     Ok((data, words))
 }
 
