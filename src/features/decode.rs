@@ -37,8 +37,9 @@ pub fn decode(bytes: &[u8], limits: DecodeLimits) -> Result<GrayImage, FeatureEr
     if bytes.is_empty() {
         return Err(FeatureError::Empty);
     }
-    // Formats the header parser knows are size-checked before decoding; OpenCV
-    // applies its own pixel limit (set at start-up) to the others.
+    // Formats the header parser knows are size-checked before decoding; for the
+    // others only OpenCV's built-in limit (2^30 pixels) applies, which is why
+    // the service refuses images whose size it cannot read from the header.
     if let Ok(size) = imagesize::blob_size(bytes) {
         let (width, height) = (size.width as u64, size.height as u64);
         if width.saturating_mul(height) > limits.max_pixels {

@@ -6,6 +6,7 @@ use super::config::Config;
 use crate::dataset::image_list;
 use crate::features::DecodeLimits;
 use crate::pipeline::{Localizer, build_map, build_vocabulary};
+use crate::quantize::QuantizerKind;
 use crate::vocabulary::Vocabulary;
 use crate::vocabulary::kmeans::KmeansConfig;
 use anyhow::{Context, bail};
@@ -36,6 +37,11 @@ pub fn load(config: &Config) -> anyhow::Result<Localizer> {
         max_pixels: config.limits.pixels,
     };
     localizer.quantizer = config.quantizer().map_err(anyhow::Error::msg)?;
+    if let QuantizerKind::Tree { .. } = localizer.quantizer {
+        // build the tree now, not in the first request
+        let groups = localizer.vocab.tree_quantizer().groups();
+        tracing::info!(groups, "quantization tree built");
+    }
     let cap = config.limits.max_features;
     let sift = &mut localizer.extract.sift;
     if cap > 0 && (sift.max_features == 0 || sift.max_features > cap) {
