@@ -8,10 +8,12 @@
 //!    once, reused by later runs;
 //! 2. [`timing`]: each query quantized once (timed);
 //! 3. [`sweep`]: calibrate the grids, then vote every setting × run × query;
-//! 4. [`summary`] (with the definitions in [`metrics`]) and [`recommend`];
+//! 4. [`summary`] (with the definitions in [`metrics`]), [`recommend`] and
+//!    [`equal_recall`];
 //! 5. [`table`] and [`plots`]: the outputs.
 
 pub mod cache;
+pub mod equal_recall;
 pub mod metrics;
 pub mod plots;
 pub mod recommend;
@@ -26,6 +28,7 @@ use crate::pipeline::progress_bar;
 use crate::vocabulary::Vocabulary;
 use crate::vocabulary::kmeans::KmeansConfig;
 use anyhow::{Context, bail};
+use equal_recall::EqualRecall;
 use rayon::prelude::*;
 use recommend::Recommendation;
 use serde::Serialize;
@@ -150,6 +153,8 @@ pub struct Report {
     /// Indices into `settings` of the settings asked for explicitly.
     pub explicit: Vec<usize>,
     pub recommendation: Option<Recommendation>,
+    /// Features each rule needs at equal recall.
+    pub equal_recall: Option<EqualRecall>,
     pub histogram: Option<HistogramInfo>,
 }
 
@@ -316,6 +321,12 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     stages.sweep_s = seconds_since(&mut clock);
 
     let recommendation = recommend::recommend(&summaries, config.tolerance);
+    let rules: Vec<String> = grids.iter().map(|g| g.rule.to_owned()).collect();
+    let equal_recall = equal_recall::equal_recall(
+        &summaries,
+        &rules,
+        &equal_recall::tolerances(config.tolerance),
+    );
     let main_warmup = config.warmups[0];
     let histogram_index = match &config.histogram {
         Some(spec) => Some(pick_setting(&summaries, spec, main_warmup)?),
@@ -351,7 +362,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         config: ConfigInfo {
             runs: config.runs,
             seed: config.seed,
-            rules: grids.iter().map(|g| g.rule.to_owned()).collect(),
+            rules,
             warmups: config.warmups.clone(),
             targets: config.targets.clone(),
             precision: summary::PRECISION,
@@ -368,18 +379,20 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         settings: summaries,
         explicit,
         recommendation,
+        equal_recall,
         histogram,
     };
     write_outputs(&report, &config.out, config.plots)?;
     Ok(report)
 }
 
-/// Write `results.md`, `results.csv`, `results.json` and (with `plots`) the
-/// figures into `out`.
+/// Write `results.md`, `results.csv`, `equal_recall.csv`, `results.json` and
+/// (with `plots`) the figures into `out`.
 pub fn write_outputs(report: &Report, out: &Path, plots: bool) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     std::fs::write(out.join("results.md"), table::markdown(report))?;
     table::write_csv(report, &out.join("results.csv"))?;
+    table::write_equal_recall_csv(report, &out.join("equal_recall.csv"))?;
     table::write_json(report, &out.join("results.json"))?;
     if plots {
         plots::write_all(report, out)?;

@@ -1,7 +1,9 @@
 //! Choosing a server default from the sweep: among the settings that lose at
 //! most `tolerance` (absolute) of the full search's recall at 90 % precision
 //! (top 5) and of its recall@1, averaged over runs, the one that uses the
-//! fewest features. The full search itself when none qualifies.
+//! fewest features. The full search itself when none qualifies. The
+//! criterion ([`within`]) is also what [`super::equal_recall`] reads each
+//! rule at.
 
 use super::summary::SettingSummary;
 use super::sweep::BASELINE;
@@ -21,6 +23,32 @@ pub struct Recommendation {
     pub baseline_recall_at_1: f64,
 }
 
+/// Whether `s` loses at most `tolerance` (absolute) of `base`'s recall at
+/// 90 % precision (top 5) and of its recall@1.
+pub fn within(s: &SettingSummary, base: &SettingSummary, tolerance: f64) -> bool {
+    s.recall90_at(5).mean >= base.recall90_at(5).mean - tolerance - 1e-12
+        && s.recall_at_1.mean >= base.recall_at_1.mean - tolerance - 1e-12
+}
+
+/// Among `candidates` (indices into `summaries`), the one using the fewest
+/// features that is [`within`] `tolerance` of `base`; the first on ties.
+pub fn cheapest_within(
+    summaries: &[SettingSummary],
+    candidates: impl IntoIterator<Item = usize>,
+    base: &SettingSummary,
+    tolerance: f64,
+) -> Option<usize> {
+    candidates
+        .into_iter()
+        .filter(|&i| within(&summaries[i], base, tolerance))
+        .min_by(|&a, &b| {
+            summaries[a]
+                .fraction
+                .mean
+                .total_cmp(&summaries[b].fraction.mean)
+        })
+}
+
 /// The cheapest setting within `tolerance` of the baseline on both recalls,
 /// or `None` without a baseline.
 pub fn recommend(summaries: &[SettingSummary], tolerance: f64) -> Option<Recommendation> {
@@ -28,17 +56,8 @@ pub fn recommend(summaries: &[SettingSummary], tolerance: f64) -> Option<Recomme
         .iter()
         .position(|s| s.setting.rule.name == BASELINE)?;
     let base = &summaries[base_index];
-    let (r90, r1) = (base.recall90_at(5).mean, base.recall_at_1.mean);
-    let within = |s: &SettingSummary| {
-        s.recall90_at(5).mean >= r90 - tolerance - 1e-12
-            && s.recall_at_1.mean >= r1 - tolerance - 1e-12
-    };
-    let index = summaries
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| within(s))
-        .min_by(|(_, a), (_, b)| a.fraction.mean.total_cmp(&b.fraction.mean))
-        .map_or(base_index, |(i, _)| i);
+    let index =
+        cheapest_within(summaries, 0..summaries.len(), base, tolerance).unwrap_or(base_index);
     let s = &summaries[index];
     Some(Recommendation {
         index,
@@ -47,36 +66,17 @@ pub fn recommend(summaries: &[SettingSummary], tolerance: f64) -> Option<Recomme
         fraction: s.fraction.mean,
         recall90_top5: s.recall90_at(5).mean,
         recall_at_1: s.recall_at_1.mean,
-        baseline_recall90_top5: r90,
-        baseline_recall_at_1: r1,
+        baseline_recall90_top5: base.recall90_at(5).mean,
+        baseline_recall_at_1: base.recall_at_1.mean,
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eval::summary::Stat;
-    use crate::eval::sweep::Setting;
-    use crate::eval::timing::StageTimes;
-    use crate::search::RuleSpec;
 
     fn summary(rule: &str, p: Option<f64>, r90: f64, r1: f64, fraction: f64) -> SettingSummary {
-        let setting = Setting {
-            rule: RuleSpec::new(rule, p).unwrap(),
-            min_features: 0,
-            target: None,
-        };
-        let stat = |mean| Stat { mean, std: 0.0 };
-        SettingSummary {
-            label: setting.label(),
-            setting,
-            recall90: [stat(r90); 3],
-            recall_at_1: stat(r1),
-            recall_at_5: stat(r1),
-            fraction: stat(fraction),
-            time_ms: StageTimes::default(),
-            runs: vec![],
-        }
+        SettingSummary::hand_made(rule, p, 0, r90, r1, fraction)
     }
 
     #[test]

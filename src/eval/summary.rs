@@ -78,6 +78,37 @@ impl SettingSummary {
     }
 }
 
+#[cfg(test)]
+impl SettingSummary {
+    /// A summary made by hand for tests: the means of recall top-n @90%P (all
+    /// n), recall@1 (and @5) and the fraction of features; no spread, no runs.
+    pub(crate) fn hand_made(
+        rule: &str,
+        parameter: Option<f64>,
+        min_features: usize,
+        recall90: f64,
+        recall_at_1: f64,
+        fraction: f64,
+    ) -> Self {
+        let setting = Setting {
+            rule: crate::search::RuleSpec::new(rule, parameter).expect("a valid rule"),
+            min_features,
+            target: None,
+        };
+        let stat = |mean| Stat { mean, std: 0.0 };
+        Self {
+            label: setting.label(),
+            setting,
+            recall90: [stat(recall90); 3],
+            recall_at_1: stat(recall_at_1),
+            recall_at_5: stat(recall_at_1),
+            fraction: stat(fraction),
+            time_ms: StageTimes::default(),
+            runs: vec![],
+        }
+    }
+}
+
 /// The metrics of one run's answers.
 pub fn run_metrics(outcomes: &[Outcome], truth: &[HashSet<u32>]) -> RunMetrics {
     let answers: Vec<Answer<'_>> = outcomes

@@ -1,8 +1,10 @@
 //! Writing a report out: markdown tables in the layout of the paper's
 //! Tables I–IV (one per rule), the warm-up comparison and the time per
-//! stage; a CSV with one row per setting; a JSON of every number.
+//! stage, the features each rule needs at equal recall; a CSV with one row
+//! per setting, another with the equal-recall table; a JSON of every number.
 
 use super::Report;
+use super::equal_recall::EqualRecall;
 use super::summary::{SettingSummary, TOP_N};
 use super::sweep::{BASELINE, format_parameter};
 use std::fmt::Write as _;
@@ -148,6 +150,9 @@ pub fn markdown(report: &Report) -> String {
     s += &explicit_section(report, base);
     s += &warmup_section(report);
     s += &timing_section(report, base);
+    if let Some(e) = &report.equal_recall {
+        s += &equal_recall_section(e);
+    }
     if let Some(r) = &report.recommendation {
         let _ = writeln!(
             s,
@@ -309,6 +314,43 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
     )
 }
 
+/// The fewest features each rule and warm-up needs at each tolerance.
+fn equal_recall_section(e: &EqualRecall) -> String {
+    let mut header: Vec<String> = ["rule", "warm-up", "settings"].map(String::from).to_vec();
+    for &t in &e.tolerances {
+        header.push(format!("% features, loss ≤ {} pt", pct(t)));
+        header.push(format!("setting, loss ≤ {} pt", pct(t)));
+    }
+    let rows: Vec<Vec<String>> = e
+        .rows
+        .iter()
+        .map(|r| {
+            let mut row = vec![
+                format!("`{}`", r.rule),
+                r.min_features.to_string(),
+                r.settings.to_string(),
+            ];
+            for c in &r.cheapest {
+                match c {
+                    Some(c) => row.extend([pct(c.fraction), c.label.clone()]),
+                    None => row.extend(["–".to_owned(), "not reached".to_owned()]),
+                }
+            }
+            row
+        })
+        .collect();
+    format!(
+        "### Features needed at equal recall\n\n\
+         For each rule and warm-up: the fewest features (mean % over queries and runs) among \
+         the settings evaluated (grid and `--set`) whose recall top-5 @90%P and recall@1 are \
+         both at most the given loss below the full search's ({} and {}); – when no setting \
+         is. No value between two settings is interpolated: the resolution is the grid's.\n\n{}\n",
+        pct(e.baseline_recall90_top5),
+        pct(e.baseline_recall_at_1),
+        markdown_table(&header, &rows)
+    )
+}
+
 /// One CSV row per setting.
 pub fn write_csv(report: &Report, path: &Path) -> anyhow::Result<()> {
     let mut w = csv::Writer::from_path(path)?;
@@ -365,8 +407,84 @@ pub fn write_csv(report: &Report, path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The equal-recall table: one row per rule, warm-up and tolerance; empty
+/// setting and fraction where no setting is within the tolerance.
+pub fn write_equal_recall_csv(report: &Report, path: &Path) -> anyhow::Result<()> {
+    let mut w = csv::Writer::from_path(path)?;
+    w.write_record([
+        "dataset",
+        "rule",
+        "min_features",
+        "settings",
+        "tolerance",
+        "setting",
+        "fraction",
+    ])?;
+    if let Some(e) = &report.equal_recall {
+        for r in &e.rows {
+            for (t, c) in e.tolerances.iter().zip(&r.cheapest) {
+                w.write_record([
+                    report.dataset.name.clone(),
+                    r.rule.clone(),
+                    r.min_features.to_string(),
+                    r.settings.to_string(),
+                    t.to_string(),
+                    c.as_ref().map_or(String::new(), |c| c.label.clone()),
+                    c.as_ref()
+                        .map_or(String::new(), |c| format!("{:.6}", c.fraction)),
+                ])?;
+            }
+        }
+    }
+    w.flush()?;
+    Ok(())
+}
+
 /// Every number, as JSON.
 pub fn write_json(report: &Report, path: &Path) -> anyhow::Result<()> {
     std::fs::write(path, serde_json::to_vec_pretty(report)?)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::equal_recall::{equal_recall, tolerances};
+    use crate::eval::summary::SettingSummary;
+
+    #[test]
+    fn equal_recall_table_shows_fractions_dashes_and_full_use() {
+        let summaries = vec![
+            SettingSummary::hand_made("none", None, 0, 0.915, 0.66, 1.0),
+            SettingSummary::hand_made("peak-mean", Some(0.011), 0, 0.912, 0.647, 0.796),
+            SettingSummary::hand_made("peak-mean", Some(0.0184), 0, 0.915, 0.658, 0.946),
+            SettingSummary::hand_made("relative", Some(11.9), 0, 0.002, 0.272, 0.329),
+            SettingSummary::hand_made("hoeffding", Some(0.5), 0, 0.915, 0.66, 1.0),
+        ];
+        let rules: Vec<String> = ["none", "peak-mean", "relative", "hoeffding"]
+            .map(String::from)
+            .to_vec();
+        let e = equal_recall(&summaries, &rules, &tolerances(0.02)).unwrap();
+        let md = equal_recall_section(&e);
+        let lines: Vec<&str> = md.lines().filter(|l| l.starts_with('|')).collect();
+        assert_eq!(
+            lines[0],
+            "| rule | warm-up | settings | % features, loss ≤ 0.5 pt | setting, loss ≤ 0.5 pt \
+             | % features, loss ≤ 2.0 pt | setting, loss ≤ 2.0 pt |"
+        );
+        assert_eq!(lines[2], "| `none` | 0 | 1 | 100.0 | none | 100.0 | none |");
+        assert_eq!(
+            lines[3],
+            "| `peak-mean` | 0 | 2 | 94.6 | peak-mean 0.0184 | 79.6 | peak-mean 0.011 |"
+        );
+        assert_eq!(
+            lines[4],
+            "| `relative` | 0 | 1 | – | not reached | – | not reached |"
+        );
+        assert_eq!(
+            lines[5],
+            "| `hoeffding` | 0 | 1 | 100.0 | hoeffding 0.5 | 100.0 | hoeffding 0.5 |"
+        );
+        assert!(md.contains("full search's (91.5 and 66.0)"), "{md}");
+    }
 }
