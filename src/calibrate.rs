@@ -8,7 +8,8 @@
 //! against it, each with a random 30 % of its features dropped. A query's
 //! neighbours along a route are then in the map but the query itself is not,
 //! as with real queries. The parameter is found by bisection with the eval's
-//! grids (`eval::sweep`).
+//! grids (`eval::sweep`). [`server_config`] writes a choice as a
+//! configuration file `bowloc serve --config` reads.
 
 use crate::eval::sweep::{
     Setting, bisect_edge, parameter_range, round_significant, search_one, seed,
@@ -21,6 +22,7 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
+use std::path::Path;
 
 /// Share of each pseudo-query's features that is dropped.
 const DROP: f64 = 0.3;
@@ -147,6 +149,38 @@ pub fn calibrate_rule(
     }))
 }
 
+/// A configuration file for `bowloc serve --config` that serves `map` (built
+/// with `vocab`) with the calibrated rule as the default of every request:
+/// `[files]` names the two files, `[search]` the rule, its parameter and its
+/// warm-up; every other key keeps its built-in default (config/default.toml).
+/// Give absolute paths for a file that works from any working directory.
+pub fn server_config(
+    best: &Calibrated,
+    vocab: &Path,
+    map: &Path,
+    max_disagreement: f64,
+) -> String {
+    // A JSON string is a valid TOML basic string.
+    let quote = |p: &Path| {
+        serde_json::to_string(&p.to_string_lossy()).expect("a string serializes")
+    };
+    format!(
+        "# Written by `bowloc calibrate --max-disagreement {max_disagreement}`: the rule whose\n\
+         # early top-1 disagreed with full search on at most that share of pseudo-queries\n\
+         # (measured {:.3}) using the fewest features ({:.1}%).\n\
+         # Serve with `bowloc serve --config FILE`; other keys: config/default.toml.\n\
+         [files]\nvocabulary = {}\nmap = {}\n\n\
+         [search]\nrule = \"{}\"\nthreshold = {}\nmin_features = {}\n",
+        best.disagreement,
+        100.0 * best.fraction,
+        quote(vocab),
+        quote(map),
+        best.rule,
+        best.parameter,
+        best.min_features
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -174,5 +208,42 @@ mod tests {
         // about 70 % of each image's (voting) features remain
         let words = map.image_words();
         assert!((p.queries[0].len() as f64 - 0.7 * words[1].len() as f64).abs() <= 1.0);
+    }
+
+    #[test]
+    fn server_config_is_a_configuration_bowloc_serve_loads() {
+        use crate::server::config::Config;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("calibrated.toml");
+        // a whole-number threshold, and a path that needs escaping
+        let best = Calibrated {
+            rule: "stable-peak".into(),
+            parameter: 730.0,
+            min_features: 100,
+            disagreement: 0.01,
+            fraction: 0.936,
+        };
+        let vocab = dir.path().join("my \"maps\"/vocab.bowvoc");
+        let map = dir.path().join("map.bowmap");
+        std::fs::write(&path, server_config(&best, &vocab, &map, 0.01)).unwrap();
+        let config = Config::load(&path).unwrap();
+        assert_eq!(config.files.vocabulary, vocab);
+        assert_eq!(config.files.map, map);
+        let rule = config.default_rule().unwrap();
+        assert_eq!((rule.name.as_str(), rule.parameter), ("stable-peak", 730.0));
+        assert_eq!(config.search.min_features, 100);
+        // the keys not written keep the built-in defaults
+        let defaults = Config::default();
+        assert_eq!(config.search.top_n, defaults.search.top_n);
+        assert_eq!(config.server, defaults.server);
+
+        let best = Calibrated {
+            rule: "peak-mean".into(),
+            parameter: 0.034_231_334_326_241_04,
+            ..best
+        };
+        std::fs::write(&path, server_config(&best, &vocab, &map, 0.01)).unwrap();
+        let rule = Config::load(&path).unwrap().default_rule().unwrap();
+        assert_eq!((rule.name.as_str(), rule.parameter), ("peak-mean", best.parameter));
     }
 }

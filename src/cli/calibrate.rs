@@ -1,10 +1,12 @@
 //! `bowloc calibrate`: choose each stopping rule's parameter for a map from
 //! pseudo-queries made of the map's own images (no ground truth), print the
-//! choices, write the most economical one as a config fragment for
-//! `bowloc serve`, and, given a dataset, check how they transfer to its real
-//! queries.
+//! choices, write the most economical one as a configuration file for
+//! `bowloc serve --config`, and, given a dataset, check how they transfer to
+//! its real queries.
 
-use bowloc::calibrate::{Calibrated, calibrate_rule, full_top1, measure, pseudo_queries};
+use bowloc::calibrate::{
+    Calibrated, calibrate_rule, full_top1, measure, pseudo_queries, server_config,
+};
 use bowloc::dataset::Dataset;
 use bowloc::eval::sweep::{Setting, search_one, seed};
 use bowloc::features::DecodeLimits;
@@ -40,7 +42,8 @@ pub struct CalibrateArgs {
     /// Random feature orders per pseudo-query.
     #[arg(long, default_value_t = 5)]
     runs: u32,
-    /// Write the rule using the fewest features as a `[search]` config fragment here.
+    /// Write the rule using the fewest features, with the vocabulary and map, as
+    /// a configuration file for `bowloc serve --config` here.
     #[arg(long)]
     out: Option<PathBuf>,
     /// A dataset in the shared layout whose real queries check the transfer.
@@ -127,18 +130,12 @@ pub fn run(a: CalibrateArgs) -> anyhow::Result<()> {
             .iter()
             .min_by(|x, y| x.fraction.total_cmp(&y.fraction))
             .ok_or_else(|| anyhow::anyhow!("no rule met the target; nothing written"))?;
-        let fragment = format!(
-            "# Written by `bowloc calibrate --max-disagreement {}` for map {} (vocabulary {}).\n\
-             # Pseudo-query disagreement {:.3}, features used {:.1}%.\n\
-             [search]\nrule = \"{}\"\nthreshold = {}\nmin_features = {}\n",
+        let absolute = |p: &PathBuf| p.canonicalize().unwrap_or_else(|_| p.clone());
+        let fragment = server_config(
+            best,
+            &absolute(&a.vocab),
+            &absolute(&a.map),
             a.max_disagreement,
-            map.meta().name,
-            map.meta().vocab_hash,
-            best.disagreement,
-            100.0 * best.fraction,
-            best.rule,
-            best.parameter,
-            best.min_features
         );
         std::fs::write(out, fragment)?;
         tracing::info!(path = %out.display(), rule = %best.rule, parameter = best.parameter, "calibrated defaults written");
