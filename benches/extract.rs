@@ -52,39 +52,44 @@ fn summary(images: &[Vec<u8>]) {
             median(runs.iter().map(|r| r.1 as f64).collect())
         );
     }
-    let c = config(640);
-    let n = images.len() as f64;
-    features::set_opencv_threads(2);
+    thread_layouts(images, &config(640));
+}
+
+/// Extraction of `images` by `requests` concurrent callers, each over every
+/// image, with `threads` OpenCV threads: (median latency in ms, images/s).
+fn layout(images: &[Vec<u8>], c: &ExtractConfig, requests: usize, threads: usize) -> (f64, f64) {
+    features::set_opencv_threads(threads);
     let start = Instant::now();
-    for i in images {
-        extract_ms(i, &c);
-    }
-    let opencv2 = n / start.elapsed().as_secs_f64();
-    features::set_opencv_threads(1);
-    let start = Instant::now();
-    let c = &c;
-    std::thread::scope(|s| {
-        for half in images.chunks(images.len().div_ceil(2)) {
-            s.spawn(move || {
-                half.iter().for_each(|i| {
-                    extract_ms(i, c);
-                })
-            });
-        }
+    let latencies: Vec<f64> = std::thread::scope(|s| {
+        let callers: Vec<_> = (0..requests)
+            .map(|_| s.spawn(move || images.iter().map(|i| extract_ms(i, c).0).collect::<Vec<_>>()))
+            .collect();
+        callers.into_iter().flat_map(|h| h.join().unwrap()).collect()
     });
-    let requests2 = n / start.elapsed().as_secs_f64();
-    let start = Instant::now();
-    for i in images {
-        extract_ms(i, c);
+    let throughput = latencies.len() as f64 / start.elapsed().as_secs_f64();
+    (median(latencies), throughput)
+}
+
+/// OpenCV's own threads versus request-level parallelism on two cores: the
+/// service's choice between one request on two threads and two requests on
+/// one thread each (or both).
+fn thread_layouts(images: &[Vec<u8>], c: &ExtractConfig) {
+    layout(images, c, 1, 1); // warm-up: OpenCV's first calls allocate
+    let layouts = [(1, 1), (1, 2), (2, 1), (2, 2)];
+    let measured: Vec<(f64, f64)> = layouts
+        .iter()
+        .map(|&(requests, threads)| layout(images, c, requests, threads))
+        .collect();
+    let (base_latency, base_throughput) = measured[0];
+    for ((requests, threads), (latency, throughput)) in layouts.into_iter().zip(measured) {
+        eprintln!(
+            "max_side 640: {requests} request(s) at once × {threads} OpenCV thread(s): \
+             median latency {latency:.1} ms ({:.2}× of 1×1), throughput {throughput:.2} images/s ({:.2}× of 1×1)",
+            latency / base_latency,
+            throughput / base_throughput
+        );
     }
-    let single = n / start.elapsed().as_secs_f64();
-    eprintln!(
-        "max_side 640 throughput: 1 request × 1 OpenCV thread {single:.1} images/s; \
-         1 request × 2 OpenCV threads {opencv2:.1} images/s ({:.2}×); \
-         2 requests × 1 thread {requests2:.1} images/s ({:.2}×)",
-        opencv2 / single,
-        requests2 / single
-    );
+    features::set_opencv_threads(1);
 }
 
 fn extract(c: &mut Criterion) {

@@ -1,14 +1,19 @@
 //! A query end to end on real images from `../shared/datasets/gardens-point`
 //! (K = 5 000): decode, extract, and the whole localization with full
-//! bag-of-words and with an early-stopping rule. Before the criterion runs it
-//! prints the median time of every stage over the query set, and the share of
-//! a request that is not SIFT extraction. The vocabulary and map are built
-//! once into `target/bench-data/` and reused.
+//! bag-of-words and with the service's default rule (read from
+//! `config/default.toml`). Before the criterion runs it prints the median
+//! time of every stage over the query set, the share of a request that is not
+//! SIFT extraction, and search time against the fraction of features used
+//! (fixed fractions from 0.1 to 1), whose ratio to the full search shows
+//! whether time saved follows features skipped. The vocabulary and map are
+//! built once into `data/gardens-5000/` (shared with `scripts/latency.sh`) and
+//! reused.
 
 use bowloc::dataset::Dataset;
 use bowloc::features::{self, DecodeLimits};
 use bowloc::pipeline::{Localizer, build_map, build_vocabulary};
 use bowloc::search::{RuleSpec, SearchOptions};
+use bowloc::server::config::Config;
 use bowloc::vocabulary::kmeans::KmeansConfig;
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::path::PathBuf;
@@ -16,11 +21,9 @@ use std::path::PathBuf;
 fn localizer() -> (Localizer, Vec<Vec<u8>>) {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let data = Dataset::open(&root.join("../shared/datasets/gardens-point")).unwrap();
-    let dir = root.join("target/bench-data");
-    let (vpath, mpath) = (
-        dir.join("gardens-5000.bowvoc"),
-        dir.join("gardens-5000.bowmap"),
-    );
+    let dir = root.join("data/gardens-5000");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (vpath, mpath) = (dir.join("vocab.bowvoc"), dir.join("map.bowmap"));
     if Localizer::open(&vpath, &mpath, true).is_err() {
         eprintln!("building the gardens-point vocabulary (K = 5000) and map");
         let config = KmeansConfig {
@@ -51,8 +54,15 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// Median per stage over the query set, printed for docs/performance.md.
-fn stage_summary(loc: &Localizer, queries: &[Vec<u8>], options: &SearchOptions, label: &str) {
-    let mut stages: [Vec<f64>; 6] = Default::default();
+/// Returns the median search time (quantize + vote, per query) and the median
+/// fraction of features used.
+fn stage_summary(
+    loc: &Localizer,
+    queries: &[Vec<u8>],
+    options: &SearchOptions,
+    label: &str,
+) -> (f64, f64) {
+    let mut stages: [Vec<f64>; 7] = Default::default();
     for _ in 0..3 {
         for q in queries {
             let r = loc.localize(q, options).unwrap();
@@ -64,17 +74,48 @@ fn stage_summary(loc: &Localizer, queries: &[Vec<u8>], options: &SearchOptions, 
                 t.vote,
                 t.total,
                 r.features.fraction,
+                t.quantize + t.vote,
             ]) {
                 s.push(v);
             }
         }
     }
-    let [decode, extract, quantize, vote, total, fraction] = stages.map(median);
+    let [decode, extract, quantize, vote, total, fraction, search] = stages.map(median);
     eprintln!(
         "{label}: median ms decode {decode:.2}, extract {extract:.2}, quantize {quantize:.2}, vote {vote:.3}, total {total:.2}; \
          non-extraction share {:.1}%; median fraction of features {fraction:.2}",
         100.0 * (total - extract) / total
     );
+    (search, fraction)
+}
+
+/// The search options `bowloc serve` uses when a request names no rule.
+fn service_defaults() -> SearchOptions {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/default.toml");
+    let config = Config::load(&path).unwrap();
+    SearchOptions {
+        rule: config.default_rule().unwrap(),
+        min_features: config.search.min_features,
+        block: config.search.block,
+        ..Default::default()
+    }
+}
+
+/// Search time (quantize + vote) against the fraction of features used, with
+/// the naive fixed-fraction rule so the fraction is the same for every query.
+fn time_versus_fraction(loc: &Localizer, queries: &[Vec<u8>], full_search_ms: f64) {
+    for f in [0.1, 0.25, 0.5, 0.75, 1.0] {
+        let options = SearchOptions {
+            rule: RuleSpec::new("fixed", Some(f)).unwrap(),
+            ..Default::default()
+        };
+        let (search, fraction) = stage_summary(loc, queries, &options, &format!("rule fixed {f}"));
+        eprintln!(
+            "time versus fraction: fraction {fraction:.2}, search {search:.2} ms, \
+             {:.2} of the full search's time",
+            search / full_search_ms
+        );
+    }
 }
 
 fn query(c: &mut Criterion) {
@@ -83,12 +124,14 @@ fn query(c: &mut Criterion) {
         rule: RuleSpec::new("none", None).unwrap(),
         ..Default::default()
     };
-    let early = SearchOptions {
-        rule: RuleSpec::new("fixed", Some(0.5)).unwrap(),
-        ..Default::default()
-    };
-    stage_summary(&loc, &queries, &full, "rule none");
-    stage_summary(&loc, &queries, &early, "rule fixed 0.5");
+    let early = service_defaults();
+    let (full_search_ms, _) = stage_summary(&loc, &queries, &full, "rule none");
+    let label = format!(
+        "default rule {} {} after {} features",
+        early.rule.name, early.rule.parameter, early.min_features
+    );
+    stage_summary(&loc, &queries, &early, &label);
+    time_versus_fraction(&loc, &queries, full_search_ms);
     let config = &loc.vocab.meta().extract;
     let mut group = c.benchmark_group("query/gardens-point");
     group.sample_size(10);
@@ -103,7 +146,7 @@ fn query(c: &mut Criterion) {
     group.bench_function("localize/none", |b| {
         b.iter(|| loc.localize(q, &full).unwrap())
     });
-    group.bench_function("localize/fixed-0.5", |b| {
+    group.bench_function("localize/default-rule", |b| {
         b.iter(|| loc.localize(q, &early).unwrap())
     });
     group.finish();
