@@ -137,7 +137,7 @@ pub fn run(a: CalibrateArgs) -> anyhow::Result<()> {
             &absolute(&a.map),
             a.max_disagreement,
         );
-        std::fs::write(out, fragment)?;
+        bowloc::store::write_atomic(out, |w| w.write_all(fragment.as_bytes()))?;
         tracing::info!(path = %out.display(), rule = %best.rule, parameter = best.parameter, "calibrated defaults written");
     }
     Ok(())

@@ -18,11 +18,14 @@
 //! section lies inside the file; section checksums are verified on open unless
 //! the caller opts out. Nothing is parsed or copied: typed sections are slices
 //! into the mapping. Writing goes through a temporary file that is renamed into
-//! place, so a crash leaves either the old file or the new one.
+//! place ([`write_atomic`]), so a crash leaves either the old file or the new
+//! one.
 
+mod atomic;
 mod reader;
 mod writer;
 
+pub use atomic::write_atomic;
 pub use reader::{Section, Store};
 pub use writer::StoreWriter;
 

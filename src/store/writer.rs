@@ -1,8 +1,8 @@
 //! Building a store file in memory section by section and writing it atomically.
 
+use super::atomic::write_atomic;
 use super::{ALIGN, Dtype, ENTRY_LEN, HEADER_LEN, NAME_LEN, StoreError, checksum};
 use std::borrow::Cow;
-use std::io::Write;
 use std::path::Path;
 
 struct PendingSection<'a> {
@@ -83,22 +83,10 @@ impl<'a> StoreWriter<'a> {
         self.owned_bytes(name, bytes)
     }
 
-    /// Write to `path` through a temporary file in the same directory, flushed
-    /// and renamed into place: readers see the old file or the new one, never a
-    /// torn one. Returns the checksum of each section, in insertion order.
+    /// Write to `path` atomically ([`write_atomic`]): readers see the old file
+    /// or the new one, never a torn one. Returns the checksum of each section,
+    /// in insertion order.
     pub fn write_atomic(&self, path: &Path) -> Result<Vec<u64>, StoreError> {
-        let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
-        if let Some(dir) = dir {
-            std::fs::create_dir_all(dir).map_err(|e| StoreError::io(dir, e))?;
-        }
-        let name = path
-            .file_name()
-            .map_or("store".into(), |n| n.to_string_lossy());
-        let mut tmp = tempfile::Builder::new()
-            .prefix(&format!(".{name}."))
-            .suffix(".tmp")
-            .tempfile_in(dir.unwrap_or(Path::new(".")))
-            .map_err(|e| StoreError::io(path, e))?;
         // Test knob: pause between sections so a test can kill a writer mid-file.
         let pause = std::env::var("BOWLOC_WRITE_DELAY_MS")
             .ok()
@@ -121,31 +109,25 @@ impl<'a> StoreWriter<'a> {
             offset = align_up(offset + section.bytes.len());
         }
 
-        let file = tmp.as_file_mut();
-        let mut out = std::io::BufWriter::with_capacity(1 << 20, file);
-        let io = |e| StoreError::io(path, e);
-        out.write_all(&self.magic).map_err(io)?;
-        out.write_all(&self.version.to_le_bytes()).map_err(io)?;
-        out.write_all(&(self.sections.len() as u32).to_le_bytes())
-            .map_err(io)?;
-        out.write_all(&checksum(&table).to_le_bytes()).map_err(io)?;
-        out.write_all(&table).map_err(io)?;
-        let mut written = HEADER_LEN + table.len();
-        for section in &self.sections {
-            let pad = align_up(written) - written;
-            out.write_all(&[0u8; ALIGN][..pad]).map_err(io)?;
-            out.write_all(&section.bytes).map_err(io)?;
-            written += pad + section.bytes.len();
-            if let Some(pause) = pause {
-                out.flush().map_err(io)?;
-                std::thread::sleep(pause);
+        write_atomic(path, |out| {
+            out.write_all(&self.magic)?;
+            out.write_all(&self.version.to_le_bytes())?;
+            out.write_all(&(self.sections.len() as u32).to_le_bytes())?;
+            out.write_all(&checksum(&table).to_le_bytes())?;
+            out.write_all(&table)?;
+            let mut written = HEADER_LEN + table.len();
+            for section in &self.sections {
+                let pad = align_up(written) - written;
+                out.write_all(&[0u8; ALIGN][..pad])?;
+                out.write_all(&section.bytes)?;
+                written += pad + section.bytes.len();
+                if let Some(pause) = pause {
+                    out.flush()?;
+                    std::thread::sleep(pause);
+                }
             }
-        }
-        out.flush().map_err(io)?;
-        drop(out);
-        tmp.as_file().sync_all().map_err(io)?;
-        tmp.persist(path)
-            .map_err(|e| StoreError::io(path, e.error))?;
+            Ok(())
+        })?;
         Ok(sums)
     }
 }
