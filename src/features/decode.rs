@@ -1,5 +1,5 @@
-//! Bytes → 8-bit grayscale image, with the pixel count checked from the file
-//! header before any pixel is decoded.
+//! Bytes → 8-bit grayscale image, with the format and pixel count checked
+//! from the file header before any pixel is decoded.
 
 use super::FeatureError;
 use opencv::core::{Mat, Vector};
@@ -32,31 +32,55 @@ impl GrayImage {
     }
 }
 
-/// Decode an in-memory image (any format OpenCV reads) to grayscale.
-pub fn decode(bytes: &[u8], limits: DecodeLimits) -> Result<GrayImage, FeatureError> {
+/// The formats [`decode`] accepts: OpenCV decodes them and the header parser
+/// reads their size.
+pub const SUPPORTED_FORMATS: &str = "JPEG, PNG, BMP, TIFF, WebP or PNM";
+
+/// Read the format and size from the header alone, and check them: a format
+/// of [`SUPPORTED_FORMATS`] and at most `limits.max_pixels` pixels. Other
+/// recognised formats (GIF, ...) are [`FeatureError::Unsupported`]; bytes in
+/// no known format, or with a damaged header, [`FeatureError::Undecodable`].
+pub fn probe(bytes: &[u8], limits: DecodeLimits) -> Result<(), FeatureError> {
+    use imagesize::ImageType;
     if bytes.is_empty() {
         return Err(FeatureError::Empty);
     }
-    // Formats the header parser knows are size-checked before decoding; for the
-    // others only OpenCV's built-in limit (2^30 pixels) applies, which is why
-    // the service refuses images whose size it cannot read from the header.
-    if let Ok(size) = imagesize::blob_size(bytes) {
-        let (width, height) = (size.width as u64, size.height as u64);
-        if width.saturating_mul(height) > limits.max_pixels {
-            return Err(FeatureError::TooLarge {
-                width,
-                height,
-                limit: limits.max_pixels,
-            });
-        }
+    let undecodable = || {
+        FeatureError::Undecodable(format!(
+            "not an image in a known format ({SUPPORTED_FORMATS}), or its header is damaged"
+        ))
+    };
+    match imagesize::image_type(bytes).map_err(|_| undecodable())? {
+        ImageType::Jpeg
+        | ImageType::Png
+        | ImageType::Bmp
+        | ImageType::Tiff
+        | ImageType::Webp
+        | ImageType::Pnm => {}
+        ImageType::Gif => return Err(FeatureError::Unsupported("GIF".into())),
+        other => return Err(FeatureError::Unsupported(format!("{other:?}"))),
     }
+    let size = imagesize::blob_size(bytes).map_err(|_| undecodable())?;
+    let (width, height) = (size.width as u64, size.height as u64);
+    if width.saturating_mul(height) > limits.max_pixels {
+        return Err(FeatureError::TooLarge {
+            width,
+            height,
+            limit: limits.max_pixels,
+        });
+    }
+    Ok(())
+}
+
+/// Decode an in-memory image to 8-bit grayscale (colour, alpha and 16-bit
+/// samples are converted), after [`probe`] has checked its header.
+pub fn decode(bytes: &[u8], limits: DecodeLimits) -> Result<GrayImage, FeatureError> {
+    probe(bytes, limits)?;
     let buf = Vector::<u8>::from_slice(bytes);
     let mat = opencv::imgcodecs::imdecode(&buf, opencv::imgcodecs::IMREAD_GRAYSCALE)
         .map_err(|e| FeatureError::Undecodable(e.message))?;
     if mat.empty() || mat.rows() == 0 || mat.cols() == 0 {
-        return Err(FeatureError::Undecodable(
-            "unknown format or damaged data".into(),
-        ));
+        return Err(FeatureError::Undecodable("damaged image data".into()));
     }
     Ok(GrayImage(mat))
 }
@@ -71,4 +95,33 @@ pub fn decode_file(
         source,
     })?;
     decode(&bytes, limits)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn probed(bytes: &[u8]) -> String {
+        match probe(bytes, DecodeLimits::default()) {
+            Ok(()) => "ok".into(),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn probe_checks_format_and_size_from_the_header() {
+        let png = |w: u32, h: u32| {
+            let mut b = b"\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR".to_vec();
+            b.extend_from_slice(&w.to_be_bytes());
+            b.extend_from_slice(&h.to_be_bytes());
+            b.extend_from_slice(&[8, 0, 0, 0, 0, 0, 0, 0, 0]);
+            b
+        };
+        assert_eq!(probed(&png(640, 480)), "ok");
+        assert!(probed(&png(50_000, 50_000)).contains("50000×50000"));
+        let gif = b"GIF89a\x10\x00\x10\x00\x00\x00\x00";
+        assert!(probed(gif).starts_with("GIF images are not supported"));
+        assert!(probed(b"not an image at all").contains("known format"));
+        assert!(probed(b"").contains("empty"));
+    }
 }

@@ -38,13 +38,17 @@ pub fn extract(image: &GrayImage, config: &ExtractConfig) -> Result<Descriptors,
     let mut keypoints = Vector::<KeyPoint>::new();
     let mut raw = Mat::default();
     sift.detect_and_compute(mat, &no_array(), &mut keypoints, &mut raw, false)?;
-    let rows = raw.rows().max(0) as usize;
+    let mut rows = raw.rows().max(0) as usize;
+    if p.max_features > 0 {
+        // OpenCV keeps ties with the weakest kept response: cap exactly.
+        rows = rows.min(p.max_features as usize);
+    }
     if rows == 0 {
         return Ok(Array2::zeros((0, 128)));
     }
     let cols = raw.cols() as usize;
     let data: &[f32] = raw.data_typed()?;
-    let mut out = Array2::from_shape_vec((rows, cols), data.to_vec())
+    let mut out = Array2::from_shape_vec((rows, cols), data[..rows * cols].to_vec())
         .map_err(|e| FeatureError::OpenCv(e.to_string()))?;
     if config.rootsift {
         rootsift(&mut out);

@@ -7,7 +7,9 @@ mod decode;
 mod extract;
 
 pub use config::{ExtractConfig, SiftParams};
-pub use decode::{DecodeLimits, GrayImage, decode, decode_file};
+pub use decode::{
+    DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe,
+};
 pub use extract::{Descriptors, extract, extract_file};
 
 /// Why an image yielded no descriptors.
@@ -17,6 +19,8 @@ pub enum FeatureError {
     Empty,
     #[error("not a decodable image ({0})")]
     Undecodable(String),
+    #[error("{0} images are not supported; send {SUPPORTED_FORMATS}")]
+    Unsupported(String),
     #[error("image of {width}×{height} pixels exceeds the limit of {limit} pixels")]
     TooLarge { width: u64, height: u64, limit: u64 },
     #[error("{path}: {source}")]

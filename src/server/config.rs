@@ -180,6 +180,28 @@ pub struct Overrides {
 #[error("{0}")]
 pub struct ConfigError(String);
 
+/// One configuration error: the key, what is wrong, and where the value came
+/// from (the file, or the environment variable by its name).
+fn describe(e: figment::Error) -> String {
+    let key = e.path.join(".").to_ascii_lowercase();
+    let from = match &e.metadata {
+        Some(m) if m.name.contains("environment") => {
+            let upper: Vec<String> = e.path.iter().map(|p| p.to_ascii_uppercase()).collect();
+            format!("environment variable {ENV_PREFIX}{}", upper.join("__"))
+        }
+        Some(m) => m
+            .source
+            .as_ref()
+            .map_or_else(|| m.name.to_string(), |s| s.to_string()),
+        None => "configuration".into(),
+    };
+    if key.is_empty() {
+        format!("{} ({from})", e.kind)
+    } else {
+        format!("{key}: {} ({from})", e.kind)
+    }
+}
+
 impl Config {
     /// Built-in defaults, then the TOML file at `path`, then `BOWLOC_`
     /// environment variables; checked.
@@ -195,7 +217,7 @@ impl Config {
             .merge(Env::prefixed(ENV_PREFIX).split("__"))
             .extract()
             .map_err(|e| {
-                let all: Vec<String> = e.into_iter().map(|e| e.to_string()).collect();
+                let all: Vec<String> = e.into_iter().map(describe).collect();
                 ConfigError(format!("invalid configuration: {}", all.join("; ")))
             })?;
         config.check()?;

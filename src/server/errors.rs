@@ -154,6 +154,11 @@ impl From<FeatureError> for ApiError {
         match e {
             FeatureError::Empty => Self::bad_request("empty_body", message),
             FeatureError::Undecodable(_) => Self::undecodable(message),
+            FeatureError::Unsupported(_) => Self::new(
+                StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                "unsupported_image_format",
+                message,
+            ),
             FeatureError::TooLarge { .. } => {
                 Self::new(StatusCode::UNPROCESSABLE_ENTITY, "image_too_large", message)
             }
@@ -203,6 +208,11 @@ mod tests {
                 },
                 422,
                 "image_too_large",
+            ),
+            (
+                FeatureError::Unsupported("GIF".into()),
+                415,
+                "unsupported_image_format",
             ),
             (FeatureError::OpenCv("x".into()), 422, "extraction_failed"),
         ];

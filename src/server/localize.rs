@@ -302,15 +302,25 @@ async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiErro
                     ApiError::bad_request("invalid_multipart", e.body_text())
                 }
             };
+            let mut image = None;
             while let Some(field) = multipart.next_field().await.map_err(multipart_error)? {
-                if field.name() == Some("image") {
-                    return field.bytes().await.map_err(multipart_error);
+                if field.name() != Some("image") {
+                    continue;
                 }
+                if image.is_some() {
+                    return Err(ApiError::bad_request(
+                        "invalid_multipart",
+                        "the multipart body has more than one field named `image`",
+                    ));
+                }
+                image = Some(field.bytes().await.map_err(multipart_error)?);
             }
-            Err(ApiError::bad_request(
-                "missing_image_field",
-                "the multipart body has no field named `image`",
-            ))
+            image.ok_or_else(|| {
+                ApiError::bad_request(
+                    "missing_image_field",
+                    "the multipart body has no field named `image`",
+                )
+            })
         }
     }
 }
@@ -351,9 +361,9 @@ pub struct LocalizeSummary {
                 (Localization = "application/json"),
                 (Vec<u8> = "application/x-protobuf"),
             )),
-        (status = 400, description = "Bad parameter (`invalid_parameter`, `unknown_rule`), empty body (`empty_body`), bad multipart (`invalid_multipart`, `missing_image_field`).", body = ErrorBody),
+        (status = 400, description = "Bad parameter (`invalid_parameter`, `unknown_rule`), empty body (`empty_body`), bad multipart (`invalid_multipart`, also for two fields `image`; `missing_image_field`).", body = ErrorBody),
         (status = 413, description = "Body over `limits.body_bytes` (`body_too_large`).", body = ErrorBody),
-        (status = 415, description = "Content type not accepted (`unsupported_media_type`).", body = ErrorBody),
+        (status = 415, description = "Content type not accepted (`unsupported_media_type`), or an image format other than JPEG, PNG, BMP, TIFF, WebP and PNM, e.g. GIF (`unsupported_image_format`).", body = ErrorBody),
         (status = 422, description = "Not a decodable image (`undecodable_image`), more pixels than `limits.pixels` (`image_too_large`), extraction failed (`extraction_failed`).", body = ErrorBody),
         (status = 503, description = "Map not loaded yet (`not_ready`), all workers busy and queue full (`overloaded`), or no worker free before the deadline (`queue_timeout`); see Retry-After.", body = ErrorBody,
             headers(("Retry-After" = u32, description = "Seconds to wait before retrying."))),
@@ -371,16 +381,8 @@ pub async fn localize(
     let mut options = LocalizeParams::from_query(query.as_deref())?.options(&state.defaults)?;
     options.deadline = Some(deadline);
     let image = read_image(&state, request).await?;
-    if image.is_empty() {
-        return Err(crate::features::FeatureError::Empty.into());
-    }
-    // Only formats whose header gives the size reach the decoder, so the
-    // pixel limit is always checked before any pixel is decoded.
-    if imagesize::blob_size(&image).is_err() {
-        return Err(ApiError::undecodable(
-            "not an image in a known format (JPEG, PNG, BMP, TIFF, WebP, PNM), or its header is damaged",
-        ));
-    }
+    // Format and pixel count from the header, before the image takes a worker.
+    crate::features::probe(&image, localizer.limits)?;
     let answer = state
         .pool
         .run(Some(tokio::time::Instant::from_std(deadline)), move || {

@@ -194,7 +194,7 @@ pub async fn serve(
                 loader = None;
                 match loaded {
                     Ok(Ok(localizer)) => state.set_localizer(localizer),
-                    Ok(Err(e)) => break Err(e.context("cannot load the map")),
+                    Ok(Err(e)) => break Err(e.context("cannot load the vocabulary and map")),
                     Err(e) => break Err(anyhow::anyhow!("loading the map failed: {e}")),
                 }
             }

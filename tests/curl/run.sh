@@ -63,7 +63,7 @@ if ! "$BIN" vocab build --images "$RTAB/map.txt" --words 1000 --seed 1 \
 fi
 ok "build a map of rtabmap-loop"
 
-# write_config FILE WORKERS QUEUE DEADLINE_MS
+# write_config FILE WORKERS QUEUE DEADLINE_MS [MAX_FEATURES]
 write_config() {
   cat >"$1" <<TOML
 [server]
@@ -77,6 +77,7 @@ map = "$TMP/map.bowmap"
 body_bytes = 2000000
 queue = $3
 deadline_ms = $4
+max_features = ${5:-4000}
 [bootstrap]
 enabled = false
 TOML
@@ -103,6 +104,20 @@ start_server() {
   done
   cat "$2"
   return 1
+}
+
+# startup_fails NAME TEXT CONFIG [VAR=VALUE...]: `serve` exits non-zero within
+# 60 s and its output contains TEXT.
+startup_fails() {
+  local name=$1 text=$2 config=$3 out rc
+  shift 3
+  out=$(env "$@" timeout 60 "$BIN" serve --config "$config" 2>&1)
+  rc=$?
+  if [ "$rc" != 0 ] && [ "$rc" != 124 ] && grep -qF -- "$text" <<<"$out"; then
+    ok "start-up fault: $name → exit $rc, names \"$text\""
+  else
+    fail "start-up fault: $name" "exit $rc, want non-zero naming \"$text\"; output: $(tail -1 <<<"$out")"
+  fi
 }
 
 write_config "$TMP/config.toml" 2 8 10000
@@ -236,6 +251,32 @@ head -c 10000 "$IMG" >"$TMP/cut-in-data.jpg"
 status=$(req "$B" "${JPEG[@]}" --data-binary @"$TMP/cut-in-data.jpg" "$BASE/localize")
 check "JPEG cut in its data is answered from what arrived" test "$status/$(jq -r .image.width "$B")" = "200/512"
 
+# --- unusual images (tests/fixtures, made by tests/fixtures/generate.py) ------
+FIX="$ROOT/tests/fixtures"
+OCTET=(-H 'Content-Type: application/octet-stream')
+expect "animated GIF" 415 unsupported_image_format "${OCTET[@]}" --data-binary @"$FIX/animated.gif" "$BASE/localize"
+expect "multipart with two image fields" 400 invalid_multipart -F "image=@$IMG" -F "image=@$IMG" "$BASE/localize"
+expect "top_n=1000000000" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?top_n=1000000000"
+# expect_answer NAME FILE JQ-FILTER: 200, the filter holds, the server still answers
+expect_answer() {
+  local status alive
+  status=$(req "$B" "${OCTET[@]}" --data-binary @"$2" "$BASE/localize?seed=1")
+  alive=$(curl -s -o /dev/null -w '%{http_code}' "$BASE/healthz")
+  if [ "$status/$alive" = 200/200 ] && jqt "$3" "$B"; then
+    ok "$1 → 200 ($(jq -c '{features: .features.total, candidates: (.candidates | length)}' "$B"))"
+  else
+    fail "$1" "got $status (server alive: $alive); body: $(head -c 300 "$B")"
+  fi
+}
+found='.features.total > 0 and (.candidates | length) > 0 and .image.width == 160'
+expect_answer "16-bit grayscale PNG is read as 8-bit gray" "$FIX/gray16.png" "$found"
+expect_answer "RGBA PNG is read as gray, alpha ignored" "$FIX/rgba.png" "$found"
+expect_answer "CMYK JPEG is read as gray" "$FIX/cmyk.jpg" "$found"
+none='.features.total == 0 and .candidates == [] and .stop.kind == "exhausted"'
+expect_answer "1×1 PNG has no features" "$FIX/one-pixel.png" "$none and .image.width == 1"
+expect_answer "uniform PNG has no features" "$FIX/uniform.png" "$none"
+expect_answer "uniform JPEG has no features" "$FIX/uniform.jpg" "$none"
+
 # --- metrics -----------------------------------------------------------------
 metric() { # metric NAME{LABELS}: its value in a fresh scrape (0 if absent)
   curl -s "$BASE/metrics" | awk -v k="$1" '$1 == k { v = $2 } END { print v + 0 }'
@@ -258,39 +299,52 @@ done
 check "metrics is Prometheus text" sh -c "curl -s -D - -o /dev/null '$BASE/metrics' | grep -qi '^content-type: text/plain; version=0.0.4'"
 check "map gauge holds the map size" grep -qx 'bowloc_map_images 40' "$TMP/metrics.txt"
 
-# --- graceful shutdown: a request in flight finishes, exit status 0 -----------
+# --- graceful shutdown under load --------------------------------------------
+# Six requests upload at 50 kB/s (about a second each), then compete for the
+# two workers. SIGTERM arrives once all six are in flight (the gauge counts
+# the scrape too): every one finishes with 200, a request sent after SIGTERM
+# while the server drains is refused, and the exit status is 0.
 BIG="$GARDENS/day_left/Image000.jpg"
 [ -f "$BIG" ] || BIG="$IMG"
-seen_busy=no
-for attempt in 1 2 3 4 5; do
-  curl -s -o "$TMP/inflight.json" -w '%{http_code}' "${JPEG[@]}" --data-binary @"$BIG" "$BASE/localize" >"$TMP/inflight.status" &
-  CURL=$!
-  for i in $(seq 1 200); do
-    if [ "$(metric bowloc_workers_busy)" -ge 1 ]; then seen_busy=yes; break; fi
-    kill -0 "$CURL" 2>/dev/null || break
-  done
-  [ "$seen_busy" = yes ] && break
-  wait "$CURL"
+curls=()
+for i in 1 2 3 4 5 6; do
+  curl -s -o "$TMP/term$i.json" -w '%{http_code}' --limit-rate 50k "${JPEG[@]}" \
+    --data-binary @"$BIG" "$BASE/localize?rule=none" >"$TMP/term$i.status" &
+  curls+=($!)
+done
+all_in_flight=no
+for i in $(seq 1 200); do
+  if [ "$(metric bowloc_http_requests_in_flight)" -ge 7 ]; then all_in_flight=yes; break; fi
+  sleep 0.01
 done
 kill -TERM "$PID"
-if [ "$seen_busy" = yes ]; then
-  wait "$CURL"
-  check "request in flight at SIGTERM completes" test "$(cat "$TMP/inflight.status")" = 200
-else
-  fail "request in flight at SIGTERM completes" "never caught a request in flight"
-fi
+sleep 0.2
+draining=no; kill -0 "$PID" 2>/dev/null && draining=yes
+: >"$B"
+late=$(curl -s -o "$B" -w '%{http_code}' --max-time 5 "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize")
+late_code=$(jq -r '.error.code // empty' "$B" 2>/dev/null)
+wait "${curls[@]}"
+statuses=$(for i in 1 2 3 4 5 6; do cat "$TMP/term$i.status"; echo; done | paste -sd,)
+check "six requests in flight at SIGTERM all complete with 200 ($statuses)" \
+  test "$all_in_flight/$statuses" = "yes/200,200,200,200,200,200"
+check "a request after SIGTERM is refused while the server drains (got ${late}${late_code:+ $late_code})" \
+  test "$draining" = yes -a \( "$late" = 000 -o "$late/$late_code" = 503/shutting_down \)
 wait "$PID"
 rc=$?
 check "SIGTERM stops the server with exit status 0" test "$rc" = 0
 check "shutdown is logged" grep -q 'stopped' "$TMP/server.log"
 
 # --- a second server: deadline and overload ----------------------------------
-write_config "$TMP/tight.toml" 1 0 1
+# It also keeps at most 50 features per query (limits.max_features); the
+# first server found more in the same image.
+write_config "$TMP/tight.toml" 1 0 1 50
 if start_server "$TMP/tight.toml" "$TMP/tight.log"; then
   ok "server with a 1 ms deadline starts"
   status=$(req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize")
   check "a search past its deadline returns the answer so far" jqt --arg s "$status" '
     $s == "200" and .stop.kind == "deadline" and .features.used < .features.total' "$B"
+  check "limits.max_features caps the features of a query ($(jq .features.total "$TMP/first.json") → $(jq .features.total "$B"))" \
+    jqt --slurpfile first "$TMP/first.json" '.features.total == 50 and $first[0].features.total > 50' "$B"
   # One worker, no queue: of requests sent at once, those beyond the first
   # running are refused with 503 and Retry-After, never queued.
   curls=()
@@ -310,18 +364,48 @@ if start_server "$TMP/tight.toml" "$TMP/tight.log"; then
   done
   check "overload: $answered answered, $refused refused with 503 overloaded + Retry-After" \
     test "$answered" -ge 1 -a "$refused" -ge 1 -a "$bad" -eq 0
+  BUSY_ADDRESS=${BASE#http://}
+  sed "s|^listen = .*|listen = \"$BUSY_ADDRESS\"|" "$TMP/config.toml" >"$TMP/busy-port.toml"
+  startup_fails "port in use" "server.listen $BUSY_ADDRESS: Address already in use" "$TMP/busy-port.toml"
   kill -TERM "$PID"; wait "$PID"
   check "second server exits 0" test $? = 0
 else
   fail "server with a 1 ms deadline starts"
 fi
 
-# --- start-up errors name the key --------------------------------------------
-printf '[search]\ntop_m = 3\n' >"$TMP/bad.toml"
-out=$("$BIN" serve --config "$TMP/bad.toml" 2>&1); rc=$?
-check "unknown config key stops start-up naming it" test "$rc" != 0 -a -n "$(echo "$out" | grep top_m)"
-out=$(BOWLOC_LIMITS__QUEUE=lots "$BIN" serve --config "$TMP/config.toml" 2>&1); rc=$?
-check "bad environment value stops start-up naming the key" test "$rc" != 0 -a -n "$(echo "$out" | grep -i queue)"
+# --- start-up faults: exit status non-zero, the message names the cause -------
+# with_files NAME VOCAB MAP: a copy of config.toml using these files.
+with_files() {
+  sed -e "s|^vocabulary = .*|vocabulary = \"$2\"|" -e "s|^map = .*|map = \"$3\"|" \
+    "$TMP/config.toml" >"$TMP/$1.toml"
+}
+V="$TMP/vocab.bowvoc"
+M="$TMP/map.bowmap"
+size=$(stat -c %s "$M")
+head -c $((size / 2)) "$M" >"$TMP/truncated.bowmap"
+# one bit flipped in the middle of the map (inside its postings)
+cp "$M" "$TMP/flipped.bowmap"
+byte=$(od -An -tu1 -j $((size / 2)) -N1 "$M" | tr -d ' ')
+printf "\\$(printf '%03o' $((byte ^ 16)))" |
+  dd of="$TMP/flipped.bowmap" bs=1 seek=$((size / 2)) conv=notrunc status=none
+head -3 "$RTAB/map.txt" | sed "s|^|$RTAB/|" >"$TMP/few.txt"
+"$BIN" --log warn vocab build --images "$TMP/few.txt" --words 20 --out "$TMP/other.bowvoc" 2>>"$TMP/build.log"
+with_files missing-vocab "$TMP/missing.bowvoc" "$M"
+with_files missing-map "$V" "$TMP/missing.bowmap"
+with_files truncated "$V" "$TMP/truncated.bowmap"
+with_files flipped "$V" "$TMP/flipped.bowmap"
+with_files other-vocab "$TMP/other.bowvoc" "$M"
+startup_fails "missing vocabulary" "missing.bowvoc is missing" "$TMP/missing-vocab.toml"
+startup_fails "missing map" "missing.bowmap is missing" "$TMP/missing-map.toml"
+startup_fails "truncated map" "truncated.bowmap: file is truncated" "$TMP/truncated.toml"
+startup_fails "map with a flipped bit" "flipped.bowmap: checksum mismatch" "$TMP/flipped.toml"
+startup_fails "map built with another vocabulary" "map.bowmap: map was built with vocabulary" "$TMP/other-vocab.toml"
+printf '[search]\ntop_m = 3\n' >"$TMP/unknown-key.toml"
+startup_fails "unknown config key" "top_m" "$TMP/unknown-key.toml"
+{ cat "$TMP/config.toml"; printf '[search]\ntop_n = -5\n'; } >"$TMP/bad-value.toml"
+startup_fails "bad config value" "search.top_n" "$TMP/bad-value.toml"
+startup_fails "bad environment value" "limits.queue: invalid type: found string \"lots\", expected usize (environment variable BOWLOC_LIMITS__QUEUE)" \
+  "$TMP/config.toml" BOWLOC_LIMITS__QUEUE=lots
 
 # --- the container's runtime libraries ---------------------------------------
 if command -v dpkg >/dev/null && command -v ldd >/dev/null; then
