@@ -165,9 +165,9 @@ pub fn server_config(
         serde_json::to_string(&p.to_string_lossy()).expect("a string serializes")
     };
     format!(
-        "# Written by `bowloc calibrate --max-disagreement {max_disagreement}`: the rule whose\n\
-         # early top-1 disagreed with full search on at most that share of pseudo-queries\n\
-         # (measured {:.3}) using the fewest features ({:.1}%).\n\
+        "# Written by `bowloc calibrate --max-disagreement {max_disagreement}`: of the rules\n\
+         # whose early top-1 disagreed with full search on at most that share of\n\
+         # pseudo-queries, the one using the fewest features ({:.3} disagreement, {:.1}%).\n\
          # Serve with `bowloc serve --config FILE`; other keys: config/default.toml.\n\
          [files]\nvocabulary = {}\nmap = {}\n\n\
          [search]\nrule = \"{}\"\nthreshold = {}\nmin_features = {}\n",
