@@ -10,20 +10,15 @@
 # queries. Run it on a quiet machine: every figure depends on the CPU.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+. scripts/lib/server.sh
 workers=${1:-2}
 connections=${2:-8}
 seconds=${3:-20}
 queue=${4:-32}
 command -v wrk >/dev/null || { echo "wrk missing: apt-get install wrk" >&2; exit 1; }
-bin=./target/release/bowloc
-[ -x "$bin" ] || cargo build --release
-data=../shared/datasets/rtabmap-loop
-mkdir -p data/load
-if [ ! -f data/load/map.bowmap ]; then
-  $bin --log warn vocab build --images $data/map.txt --words 1000 --seed 1 --out data/load/vocab.bowvoc
-  $bin --log warn map build --vocab data/load/vocab.bowvoc --images $data/map.txt --out data/load/map.bowmap
-fi
+load_map
 tmp=$(mktemp -d)
+trap 'stop_server; rm -rf "$tmp"' EXIT
 cat >"$tmp/config.toml" <<TOML
 [server]
 listen = "127.0.0.1:0"
@@ -36,26 +31,17 @@ queue = $queue
 [bootstrap]
 enabled = false
 TOML
-$bin serve --config "$tmp/config.toml" >"$tmp/server.log" 2>&1 &
-pid=$!
-trap 'kill $pid 2>/dev/null; wait $pid 2>/dev/null; rm -rf "$tmp"' EXIT
-for _ in $(seq 100); do
-  addr=$(grep -o 'listening.*127\.0\.0\.1:[0-9]*' "$tmp/server.log" | grep -o '127\.0\.0\.1:[0-9]*' | head -1 || true)
-  [ -n "$addr" ] && curl -sf "http://$addr/readyz" >/dev/null && break
-  sleep 0.1
-done
-[ -n "${addr:-}" ] || { cat "$tmp/server.log"; echo "server did not start" >&2; exit 1; }
-rss() { awk '/VmRSS/ {print $2}' /proc/$pid/status; }
+start_server "$tmp/config.toml" "$tmp/server.log"
 cat >"$tmp/post.lua" <<LUA
-local f = io.open("$data/images/50.jpg", "rb")
+local f = io.open("$DATASET/images/50.jpg", "rb")
 wrk.method = "POST"
 wrk.body = f:read("*all")
 f:close()
 wrk.headers["Content-Type"] = "image/jpeg"
 LUA
-before=$(rss)
-wrk -t 2 -c "$connections" -d "${seconds}s" --latency -s "$tmp/post.lua" "http://$addr/localize" >"$tmp/wrk.txt"
-after=$(rss)
+before=$(server_rss_kib)
+wrk -t 2 -c "$connections" -d "${seconds}s" --latency -s "$tmp/post.lua" "http://$SERVER_ADDR/localize" >"$tmp/wrk.txt"
+after=$(server_rss_kib)
 rps=$(awk '/Requests\/sec/ {print $2}' "$tmp/wrk.txt")
 total=$(awk '/requests in/ {print $1}' "$tmp/wrk.txt")
 refused=$(awk '/Non-2xx/ {print $NF}' "$tmp/wrk.txt")

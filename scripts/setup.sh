@@ -3,7 +3,10 @@
 # does nothing when they are already there).
 set -euo pipefail
 # fonts-dejavu-core: the TrueType font `bowloc eval` draws its plots' text with.
-packages=(libopencv-dev clang libclang-dev curl jq make ca-certificates fonts-dejavu-core)
+# python3-venv: scripts/schemathesis.sh installs schemathesis into a virtualenv.
+# wrk: the load scripts (scripts/load.sh, scripts/overload.sh).
+packages=(libopencv-dev clang libclang-dev curl jq make ca-certificates fonts-dejavu-core
+  python3 python3-venv wrk)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
