@@ -16,15 +16,15 @@ every=${1:-10}
 extra=${2:-}
 gardens_map 5000
 tmp=$(mktemp -d)
-server_config 1 4 "" data/gardens-5000 >"$tmp/config.toml"
+trap 'stop_server; rm -rf "$tmp"' EXIT
+server_config 1 4 data/gardens-5000 >"$tmp/config.toml"
 start_server "$tmp/config.toml" "$tmp/server.log"
-trap 'kill $SERVER_PID 2>/dev/null; wait $SERVER_PID 2>/dev/null; rm -rf "$tmp"' EXIT
 src=../shared/datasets/gardens-point
 : >"$tmp/rows"
 for pass in 1 2 3; do
   awk -v e="$every" 'NR % e == 1' $src/queries.txt | while read -r q; do
     client=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
-      --data-binary @"$src/$q" "http://$ADDR/localize?seed=$pass${extra:+&$extra}")
+      --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass${extra:+&$extra}")
     jq -r --arg c "$client" '[($c | tonumber) * 1000, .timings_ms.decode, .timings_ms.extract,
       .timings_ms.quantize, .timings_ms.vote, .timings_ms.total, .features.fraction] | @tsv' \
       "$tmp/answer.json" >>"$tmp/rows"

@@ -8,6 +8,12 @@
 #                            SERVER_PID and SERVER_ADDR (127.0.0.1:PORT)
 #   stop_server              SIGTERM, then wait for it to exit
 #   server_rss_kib           the server's resident memory in KiB
+#   gardens_map K            the gardens-point map (K words) in
+#                            data/gardens-K/, built on first use
+#   server_config WORKERS QUEUE [DIR] [EXTRA-TOML]
+#                            a loopback configuration for the map in DIR
+#                            (default data/load), printed
+#   wrk_post_script FILE IMAGE   a wrk Lua script that posts IMAGE (JPEG)
 
 BOWLOC_BIN=./target/release/bowloc
 DATASET=../shared/datasets/rtabmap-loop
@@ -48,4 +54,42 @@ stop_server() {
 
 server_rss_kib() {
   awk '/VmRSS/ {print $2}' "/proc/$SERVER_PID/status"
+}
+
+gardens_map() {
+  [ -x "$BOWLOC_BIN" ] || cargo build --release
+  local dir=data/gardens-$1 src=../shared/datasets/gardens-point
+  mkdir -p "$dir"
+  if [ ! -f "$dir/map.bowmap" ]; then
+    "$BOWLOC_BIN" --log warn vocab build --images "$src/map.txt" --words "$1" --seed 1 \
+      --out "$dir/vocab.bowvoc"
+    "$BOWLOC_BIN" --log warn map build --vocab "$dir/vocab.bowvoc" --images "$src/map.txt" \
+      --out "$dir/map.bowmap" --name gardens-point
+  fi
+}
+
+server_config() {
+  cat <<TOML
+[server]
+listen = "127.0.0.1:0"
+workers = $1
+[files]
+vocabulary = "${3:-data/load}/vocab.bowvoc"
+map = "${3:-data/load}/map.bowmap"
+[limits]
+queue = $2
+${4:-}
+[bootstrap]
+enabled = false
+TOML
+}
+
+wrk_post_script() {
+  cat >"$1" <<LUA
+local f = io.open("$2", "rb")
+wrk.method = "POST"
+wrk.body = f:read("*all")
+f:close()
+wrk.headers["Content-Type"] = "image/jpeg"
+LUA
 }
