@@ -19,28 +19,11 @@ command -v wrk >/dev/null || { echo "wrk missing: apt-get install wrk" >&2; exit
 load_map
 tmp=$(mktemp -d)
 trap 'stop_server; rm -rf "$tmp"' EXIT
-cat >"$tmp/config.toml" <<TOML
-[server]
-listen = "127.0.0.1:0"
-workers = $workers
-[files]
-vocabulary = "data/load/vocab.bowvoc"
-map = "data/load/map.bowmap"
-[limits]
-queue = $queue
-[bootstrap]
-enabled = false
-TOML
+server_config "$workers" "$queue" >"$tmp/config.toml"
 start_server "$tmp/config.toml" "$tmp/server.log"
-cat >"$tmp/post.lua" <<LUA
-local f = io.open("$DATASET/images/50.jpg", "rb")
-wrk.method = "POST"
-wrk.body = f:read("*all")
-f:close()
-wrk.headers["Content-Type"] = "image/jpeg"
-LUA
+wrk_post_script "$tmp/post.lua" "$DATASET/images/50.jpg"
 before=$(server_rss_kib)
-wrk -t 2 -c "$connections" -d "${seconds}s" --latency -s "$tmp/post.lua" "http://$SERVER_ADDR/localize" >"$tmp/wrk.txt"
+wrk -t 1 -c "$connections" -d "${seconds}s" --latency -s "$tmp/post.lua" "http://$SERVER_ADDR/localize" >"$tmp/wrk.txt"
 after=$(server_rss_kib)
 rps=$(awk '/Requests\/sec/ {print $2}' "$tmp/wrk.txt")
 total=$(awk '/requests in/ {print $1}' "$tmp/wrk.txt")

@@ -30,28 +30,10 @@ command -v wrk >/dev/null || { echo "wrk missing: apt-get install wrk" >&2; exit
 load_map
 tmp=$(mktemp -d)
 trap 'stop_server; rm -rf "$tmp"' EXIT
-cat >"$tmp/config.toml" <<TOML
-[server]
-listen = "127.0.0.1:0"
-workers = $workers
-log_format = "human"
-[files]
-vocabulary = "data/load/vocab.bowvoc"
-map = "data/load/map.bowmap"
-[limits]
-queue = $queue
-[bootstrap]
-enabled = false
-TOML
+server_config "$workers" "$queue" >"$tmp/config.toml"
 start_server "$tmp/config.toml" "$tmp/server.log"
 image="$DATASET/images/50.jpg"
-cat >"$tmp/post.lua" <<LUA
-local f = io.open("$image", "rb")
-wrk.method = "POST"
-wrk.body = f:read("*all")
-f:close()
-wrk.headers["Content-Type"] = "image/jpeg"
-LUA
+wrk_post_script "$tmp/post.lua" "$image"
 url="http://$SERVER_ADDR/localize"
 rss_start=$(server_rss_kib)
 wrk -t 1 -c 2 -d 5s -s "$tmp/post.lua" "$url" >"$tmp/warmup.txt"

@@ -28,16 +28,7 @@ fi
 load_map
 tmp=$(mktemp -d)
 trap 'stop_server; rm -rf "$tmp"' EXIT
-cat >"$tmp/config.toml" <<TOML
-[server]
-listen = "127.0.0.1:0"
-workers = 2
-[files]
-vocabulary = "data/load/vocab.bowvoc"
-map = "data/load/map.bowmap"
-[bootstrap]
-enabled = false
-TOML
+server_config 2 32 >"$tmp/config.toml"
 start_server "$tmp/config.toml" "$tmp/server.log"
 status=0
 "$venv/bin/schemathesis" run "http://$SERVER_ADDR/openapi.json" \
