@@ -30,7 +30,7 @@ refused=0
 round=0
 while [ "$total" -lt "$requests" ] && [ "$round" -lt 100 ]; do
   round=$((round + 1))
-  wrk -t 2 -c "$connections" -d "${round_seconds}s" -s "$tmp/post.lua" "http://$SERVER_ADDR/localize" >"$tmp/wrk.txt"
+  wrk -t 1 -c "$connections" -d "${round_seconds}s" -s "$tmp/post.lua" "http://$SERVER_ADDR/localize" >"$tmp/wrk.txt"
   total=$((total + $(awk '/requests in/ {print $1}' "$tmp/wrk.txt")))
   refused=$((refused + $(awk '/Non-2xx/ {n = $NF} END {print n + 0}' "$tmp/wrk.txt")))
   echo "$round $total $refused $(awk '/Requests\/sec/ {print $2}' "$tmp/wrk.txt") $(server_rss_kib)"

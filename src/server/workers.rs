@@ -1,12 +1,18 @@
 //! The bounded pool that runs CPU work (decode, SIFT, quantize, vote) off the
-//! async runtime: at most `workers` jobs run at once on tokio's blocking
-//! threads, at most `queue` more wait for a turn, and anything beyond is
-//! refused at once so that latency cannot grow without bound. A job that
-//! panics is caught and reported as an error; the pool keeps working.
+//! async runtime: `workers` dedicated threads take jobs from one queue, at
+//! most `queue` more jobs wait for a turn, and anything beyond is refused at
+//! once so that latency cannot grow without bound. A worker that finishes a
+//! job takes the next waiting one itself, with no trip through the async
+//! runtime, so the workers stay busy under load even when every core is. A
+//! job that panics is caught and reported as an error; the pool keeps working.
+//! [`WorkerPool::close`] lets the workers finish and end before the process
+//! exits (OpenCV's per-thread state must not outlive its library's teardown).
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::sync::Arc;
-use tokio::sync::Semaphore;
+use std::sync::atomic::{AtomicU8, AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex, mpsc};
+use std::time::Duration;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore, oneshot};
 use tokio::time::Instant;
 
 /// Why a job did not produce its result.
@@ -20,23 +26,73 @@ pub enum PoolError {
     Panicked(String),
 }
 
+/// A job's progress, shared by the caller and the worker that takes it.
+const WAITING: u8 = 0;
+const STARTED: u8 = 1;
+const ABANDONED: u8 = 2;
+
+/// Runs a job and hands back what delivers its result to the caller.
+type Work = Box<dyn FnOnce() -> Box<dyn FnOnce() + Send> + Send>;
+
+/// A job in the queue: the work, its progress, and its place in the pool
+/// (released when the job is done or dropped unstarted).
+struct Job {
+    work: Work,
+    progress: Arc<AtomicU8>,
+    ticket: OwnedSemaphorePermit,
+}
+
+/// What a worker takes from the queue.
+enum Message {
+    Job(Job),
+    Stop,
+}
+
+/// Worker threads still running, and a signal when one ends.
+#[derive(Default)]
+struct Alive {
+    count: Mutex<usize>,
+    ended: Condvar,
+}
+
 /// A bounded worker pool; cheap to clone (clones share the pool).
 #[derive(Clone)]
 pub struct WorkerPool {
-    /// One permit per worker.
-    running: Arc<Semaphore>,
+    jobs: mpsc::Sender<Message>,
+    alive: Arc<Alive>,
     /// One permit per job admitted (running or waiting).
     admitted: Arc<Semaphore>,
+    busy: Arc<AtomicUsize>,
     workers: usize,
     queue: usize,
 }
 
 impl WorkerPool {
+    /// A pool of `workers` threads (at least one) and `queue` waiting places.
+    /// The threads end when the last clone of the pool is dropped.
     pub fn new(workers: usize, queue: usize) -> Self {
         let workers = workers.max(1);
+        let (jobs, inbox) = mpsc::channel::<Message>();
+        let inbox = Arc::new(Mutex::new(inbox));
+        let busy = Arc::new(AtomicUsize::new(0));
+        let alive = Arc::new(Alive::default());
+        for i in 0..workers {
+            let (inbox, busy, alive) = (inbox.clone(), busy.clone(), alive.clone());
+            *alive.count.lock().expect("never poisoned") += 1;
+            std::thread::Builder::new()
+                .name(format!("bowloc-worker-{i}"))
+                .spawn(move || {
+                    work(&inbox, &busy);
+                    *alive.count.lock().expect("never poisoned") -= 1;
+                    alive.ended.notify_all();
+                })
+                .expect("spawning a worker thread");
+        }
         Self {
-            running: Arc::new(Semaphore::new(workers)),
+            jobs,
+            alive,
             admitted: Arc::new(Semaphore::new(workers + queue)),
+            busy,
             workers,
             queue,
         }
@@ -57,14 +113,15 @@ impl WorkerPool {
 
     /// Jobs running now.
     pub fn busy(&self) -> usize {
-        self.workers - self.running.available_permits()
+        self.busy.load(Ordering::Relaxed)
     }
 
     /// Run `job` on a worker once one is free. Refused at once with
     /// [`PoolError::QueueFull`] when `workers + queue` jobs are admitted; gives
-    /// up with [`PoolError::TimedOut`] if `deadline` passes before a worker is
-    /// free. Once started the job runs to its end even if the caller goes
-    /// away, holding its places until then.
+    /// up with [`PoolError::TimedOut`] if `deadline` passes while the job
+    /// waits for a worker (a job admitted while a worker is free never waits).
+    /// Once started the job runs to its end even if the caller goes away,
+    /// holding its place until then.
     pub async fn run<T, F>(&self, deadline: Option<Instant>, job: F) -> Result<T, PoolError>
     where
         T: Send + 'static,
@@ -75,24 +132,85 @@ impl WorkerPool {
             .clone()
             .try_acquire_owned()
             .map_err(|_| PoolError::QueueFull)?;
-        let acquire = self.running.clone().acquire_owned();
-        let permit = match deadline {
-            Some(d) => tokio::time::timeout_at(d, acquire)
-                .await
-                .map_err(|_| PoolError::TimedOut)?,
-            None => acquire.await,
-        }
-        .expect("the pool's semaphores are never closed");
-        let handle = tokio::task::spawn_blocking(move || {
+        let waits = self.admitted() > self.workers;
+        let (done, result) = oneshot::channel();
+        let progress = Arc::new(AtomicU8::new(WAITING));
+        let work: Work = Box::new(move || {
             let result = catch_unwind(AssertUnwindSafe(job));
-            drop((permit, ticket));
-            result
+            Box::new(move || {
+                let _ = done.send(result);
+            })
         });
-        match handle.await {
+        self.jobs
+            .send(Message::Job(Job {
+                work,
+                progress: progress.clone(),
+                ticket,
+            }))
+            .map_err(|_| PoolError::Panicked("the workers have stopped".into()))?;
+        let result = match deadline.filter(|_| waits) {
+            None => result.await,
+            Some(d) => {
+                let mut result = result;
+                match tokio::time::timeout_at(d, &mut result).await {
+                    Ok(r) => r,
+                    Err(_) => {
+                        let unstarted = progress
+                            .compare_exchange(WAITING, ABANDONED, Ordering::AcqRel, Ordering::Acquire)
+                            .is_ok();
+                        if unstarted {
+                            return Err(PoolError::TimedOut);
+                        }
+                        result.await
+                    }
+                }
+            }
+        };
+        match result {
             Ok(Ok(value)) => Ok(value),
             Ok(Err(panic)) => Err(PoolError::Panicked(panic_message(panic.as_ref()))),
-            Err(e) => Err(PoolError::Panicked(e.to_string())),
+            Err(_) => Err(PoolError::Panicked("the worker stopped".into())),
         }
+    }
+}
+
+impl WorkerPool {
+    /// Stop the workers once the jobs already queued are done, and wait up to
+    /// `timeout` for them to end. Returns whether they all did. For the end
+    /// of the service, once no more jobs will come.
+    pub fn close(&self, timeout: Duration) -> bool {
+        for _ in 0..self.workers {
+            let _ = self.jobs.send(Message::Stop);
+        }
+        let count = self.alive.count.lock().expect("never poisoned");
+        let (count, _) = self
+            .alive
+            .ended
+            .wait_timeout_while(count, timeout, |n| *n > 0)
+            .expect("never poisoned");
+        *count == 0
+    }
+}
+
+/// A worker thread: take jobs until told to stop or the pool is gone. A job
+/// abandoned while waiting is dropped unrun, which frees its place.
+fn work(inbox: &Mutex<mpsc::Receiver<Message>>, busy: &AtomicUsize) {
+    loop {
+        let next = inbox.lock().map_err(drop).and_then(|rx| rx.recv().map_err(drop));
+        let Ok(Message::Job(job)) = next else { return };
+        let taken = job
+            .progress
+            .compare_exchange(WAITING, STARTED, Ordering::AcqRel, Ordering::Acquire)
+            .is_ok();
+        if !taken {
+            continue;
+        }
+        busy.fetch_add(1, Ordering::Relaxed);
+        let deliver = (job.work)();
+        busy.fetch_sub(1, Ordering::Relaxed);
+        // The place is free before the caller hears of the result.
+        drop(job.ticket);
+        deliver();
     }
 }
 
@@ -166,6 +284,28 @@ mod tests {
         first.await.unwrap().unwrap();
         // With a free worker a passed deadline does not refuse the job.
         assert_eq!(pool.run(Some(past), || 2).await, Ok(2));
+    }
+
+    #[tokio::test]
+    async fn a_job_abandoned_while_waiting_never_runs_and_frees_its_place() {
+        use std::sync::atomic::AtomicBool;
+        let pool = WorkerPool::new(1, 2);
+        let (first, release, started) = blocking_job(&pool);
+        started.await.unwrap();
+        let ran = Arc::new(AtomicBool::new(false));
+        let soon = Instant::now() + std::time::Duration::from_millis(20);
+        let job = {
+            let ran = ran.clone();
+            move || ran.store(true, Ordering::SeqCst)
+        };
+        assert_eq!(pool.run(Some(soon), job).await, Err(PoolError::TimedOut));
+        release.send(()).unwrap();
+        first.await.unwrap().unwrap();
+        // Jobs are taken in order, so this one runs after the abandoned one
+        // was taken off the queue.
+        assert_eq!(pool.run(None, || 5).await, Ok(5));
+        assert!(!ran.load(Ordering::SeqCst));
+        assert_eq!(pool.admitted(), 0);
     }
 
     #[tokio::test]
