@@ -44,8 +44,6 @@ pub fn config(a: &ServeArgs) -> anyhow::Result<Config> {
 }
 
 pub fn run(config: Config) -> anyhow::Result<()> {
-    // Each worker runs one query on one core: OpenCV must not fan out too.
-    bowloc::features::set_opencv_threads(1);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .thread_name("bowloc-http")

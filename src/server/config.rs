@@ -35,6 +35,8 @@ pub struct ServerConfig {
     pub listen: SocketAddr,
     /// Threads doing CPU work (decode, SIFT, quantize, vote); 0 = one per core.
     pub workers: usize,
+    /// OpenCV threads each worker's SIFT extraction may fan out to.
+    pub opencv_threads: usize,
     pub log_format: LogFormat,
 }
 
@@ -108,6 +110,7 @@ impl Default for ServerConfig {
         Self {
             listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
             workers: 0,
+            opencv_threads: 1,
             log_format: LogFormat::Human,
         }
     }
@@ -272,6 +275,9 @@ impl Config {
                 "search.min_score",
                 format!("must be a finite number ≥ 0, got {}", s.min_score),
             );
+        }
+        if self.server.opencv_threads == 0 {
+            return bad("server.opencv_threads", "must be at least 1".into());
         }
         let l = &self.limits;
         if l.body_bytes == 0 {

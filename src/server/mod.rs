@@ -193,7 +193,14 @@ pub async fn serve(
             loaded = async { loader.as_mut().expect("guarded").await }, if loader.is_some() => {
                 loader = None;
                 match loaded {
-                    Ok(Ok(localizer)) => state.set_localizer(localizer),
+                    Ok(Ok(localizer)) => {
+                        // Set once the map is loaded: building one at start-up
+                        // runs OpenCV single-threaded under rayon. By default
+                        // each worker runs one query on one core and OpenCV
+                        // does not fan out too (docs/performance.md).
+                        crate::features::set_opencv_threads(state.config.server.opencv_threads);
+                        state.set_localizer(localizer)
+                    }
                     Ok(Err(e)) => break Err(e.context("cannot load the vocabulary and map")),
                     Err(e) => break Err(anyhow::anyhow!("loading the map failed: {e}")),
                 }
