@@ -82,7 +82,8 @@ fn stage_summary(
     }
     let [decode, extract, quantize, vote, total, fraction, search] = stages.map(median);
     eprintln!(
-        "{label}: median ms decode {decode:.2}, extract {extract:.2}, quantize {quantize:.2}, vote {vote:.3}, total {total:.2}; \
+        "{label}: median ms decode {decode:.2}, extract {extract:.2}, quantize {quantize:.2}, vote {vote:.3}, \
+         search (quantize + vote) {search:.2}, total {total:.2}; \
          non-extraction share {:.1}%; median fraction of features {fraction:.2}",
         100.0 * (total - extract) / total
     );
