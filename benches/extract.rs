@@ -62,9 +62,19 @@ fn layout(images: &[Vec<u8>], c: &ExtractConfig, requests: usize, threads: usize
     let start = Instant::now();
     let latencies: Vec<f64> = std::thread::scope(|s| {
         let callers: Vec<_> = (0..requests)
-            .map(|_| s.spawn(move || images.iter().map(|i| extract_ms(i, c).0).collect::<Vec<_>>()))
+            .map(|_| {
+                s.spawn(move || {
+                    images
+                        .iter()
+                        .map(|i| extract_ms(i, c).0)
+                        .collect::<Vec<_>>()
+                })
+            })
             .collect();
-        callers.into_iter().flat_map(|h| h.join().unwrap()).collect()
+        callers
+            .into_iter()
+            .flat_map(|h| h.join().unwrap())
+            .collect()
     });
     let throughput = latencies.len() as f64 / start.elapsed().as_secs_f64();
     (median(latencies), throughput)

@@ -154,16 +154,10 @@ pub fn calibrate_rule(
 /// `[files]` names the two files, `[search]` the rule, its parameter and its
 /// warm-up; every other key keeps its built-in default (config/default.toml).
 /// Give absolute paths for a file that works from any working directory.
-pub fn server_config(
-    best: &Calibrated,
-    vocab: &Path,
-    map: &Path,
-    max_disagreement: f64,
-) -> String {
+pub fn server_config(best: &Calibrated, vocab: &Path, map: &Path, max_disagreement: f64) -> String {
     // A JSON string is a valid TOML basic string.
-    let quote = |p: &Path| {
-        serde_json::to_string(&p.to_string_lossy()).expect("a string serializes")
-    };
+    let quote =
+        |p: &Path| serde_json::to_string(&p.to_string_lossy()).expect("a string serializes");
     format!(
         "# Written by `bowloc calibrate --max-disagreement {max_disagreement}`: of the rules\n\
          # whose early top-1 disagreed with full search on at most that share of\n\
@@ -244,6 +238,9 @@ mod tests {
         };
         std::fs::write(&path, server_config(&best, &vocab, &map, 0.01)).unwrap();
         let rule = Config::load(&path).unwrap().default_rule().unwrap();
-        assert_eq!((rule.name.as_str(), rule.parameter), ("peak-mean", best.parameter));
+        assert_eq!(
+            (rule.name.as_str(), rule.parameter),
+            ("peak-mean", best.parameter)
+        );
     }
 }

@@ -4,6 +4,8 @@
 //! once the temporary file exists, and checks the old map still opens with
 //! every checksum verified; then lets a run finish and checks the new map.
 
+mod common;
+
 use bowloc::index::MapIndex;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -23,7 +25,7 @@ fn temp_files(dir: &Path) -> Vec<PathBuf> {
 
 #[test]
 fn killed_map_build_leaves_previous_map_intact() {
-    let rtab = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets/rtabmap-loop");
+    let rtab = common::dataset("rtabmap-loop");
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let s = |p: &Path| p.to_string_lossy().into_owned();

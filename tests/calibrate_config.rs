@@ -2,19 +2,10 @@
 //! rtabmap-loop images writes a configuration that `bowloc serve --config
 //! FILE` loads as is, serving that map with the calibrated rule.
 
-use bowloc::server::config::Config;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
-fn dataset() -> PathBuf {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets/rtabmap-loop");
-    assert!(
-        d.join("map.txt").is_file(),
-        "{} is missing: the shared datasets sit beside the project",
-        d.display()
-    );
-    d
-}
+use bowloc::server::config::Config;
+use std::process::Command;
 
 /// Run bowloc with `args`; its stdout.
 fn bowloc(args: &[&std::ffi::OsStr]) -> String {
@@ -38,7 +29,7 @@ fn calibrate_out_is_a_configuration_the_server_loads() {
         dir.path().join("map.bowmap"),
         dir.path().join("calibrated.toml"),
     );
-    let images = dataset().join("map.txt");
+    let images = common::dataset("rtabmap-loop").join("map.txt");
     let os = |s: &'static str| std::ffi::OsStr::new(s);
     bowloc(&[
         os("vocab"),
@@ -83,7 +74,10 @@ fn calibrate_out_is_a_configuration_the_server_loads() {
     let row = format!(
         "| {} | {} |",
         rule.name,
-        config.search.threshold.expect("a calibrated rule has a parameter")
+        config
+            .search
+            .threshold
+            .expect("a calibrated rule has a parameter")
     );
     assert!(table.contains(&row), "{row} not in\n{table}");
     // It is the printed rule using the fewest pseudo-query features.

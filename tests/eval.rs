@@ -1,25 +1,17 @@
 //! End to end: `bowloc eval` on the real rtabmap-loop dataset with a small
 //! vocabulary and few runs, then a second run served from the cache.
 
-use serde_json::Value;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
-fn dataset() -> PathBuf {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets/rtabmap-loop");
-    assert!(
-        d.join("map.txt").is_file(),
-        "{} is missing: the shared datasets sit beside the project",
-        d.display()
-    );
-    d
-}
+use serde_json::Value;
+use std::path::Path;
+use std::process::Command;
 
 fn eval(out: &Path, cache: &Path, extra: &[&str]) -> String {
     let output = Command::new(env!("CARGO_BIN_EXE_bowloc"))
         .arg("eval")
         .arg("--dataset")
-        .arg(dataset())
+        .arg(common::dataset("rtabmap-loop"))
         .arg("--out")
         .arg(out)
         .arg("--cache")

@@ -2,17 +2,14 @@
 //! `rtabmap-loop`'s map images, localize every query, and measure recall@5
 //! against the ground truth; plus the CLI's handling of bad input.
 
+mod common;
+
 use bowloc::dataset::Dataset;
 use bowloc::features::{DecodeLimits, ExtractConfig};
 use bowloc::pipeline::{Localizer, extract_all, index_descriptors, stack, train_vocabulary};
 use bowloc::search::{RuleSpec, SearchOptions};
 use bowloc::vocabulary::kmeans::KmeansConfig;
-use std::path::PathBuf;
 use std::process::Command;
-
-fn datasets() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets")
-}
 
 fn bowloc() -> Command {
     Command::new(env!("CARGO_BIN_EXE_bowloc"))
@@ -25,7 +22,7 @@ const RECALL_AT_5_FLOOR: f64 = 0.90;
 
 #[test]
 fn rtabmap_loop_recall_at_5_with_full_bow() {
-    let data = Dataset::open(&datasets().join("rtabmap-loop")).unwrap();
+    let data = Dataset::open(&common::dataset("rtabmap-loop")).unwrap();
     let extract = ExtractConfig::default();
     let map_desc = extract_all(&data.map, &extract, DecodeLimits::default(), false, "map").unwrap();
     let parts: Vec<_> = map_desc.iter().flatten().collect();
@@ -87,7 +84,7 @@ fn run(args: &[&str]) -> (bool, String) {
 fn cli_reports_bad_input_clearly() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let rtab = datasets().join("rtabmap-loop");
+    let rtab = common::dataset("rtabmap-loop");
     let map_list = rtab.join("map.txt");
     let p = |name: &str| d.join(name).to_string_lossy().into_owned();
 

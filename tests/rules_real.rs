@@ -6,12 +6,13 @@
 //!
 //! Each query is quantized once and voted many times (`search_words`).
 
+mod common;
+
 use bowloc::dataset::Dataset;
 use bowloc::features::{DecodeLimits, ExtractConfig};
 use bowloc::pipeline::{extract_all, index_descriptors, stack, train_vocabulary, words_per_image};
 use bowloc::search::{RuleSpec, SearchOptions, search_words};
 use bowloc::vocabulary::kmeans::KmeansConfig;
-use std::path::PathBuf;
 
 struct Prepared {
     name: String,
@@ -20,10 +21,7 @@ struct Prepared {
 }
 
 fn prepare(dataset: &str, words: usize) -> Prepared {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/datasets")
-        .join(dataset);
-    let data = Dataset::open(&root).unwrap();
+    let data = Dataset::open(&common::dataset(dataset)).unwrap();
     let extract = ExtractConfig::default();
     let limits = DecodeLimits::default();
     let map_desc = extract_all(&data.map, &extract, limits, false, "map").unwrap();

@@ -3,6 +3,8 @@
 //! compared with the JSON answer, the served OpenAPI document against the
 //! committed one, and the not-ready state before the map is loaded.
 
+mod common;
+
 use axum::body::Body;
 use axum::http::{Request, StatusCode, header};
 use bowloc::dataset::image_list;
@@ -20,17 +22,13 @@ fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
-fn rtab() -> PathBuf {
-    root().join("../shared/datasets/rtabmap-loop")
-}
-
 /// A small vocabulary and map from the first 12 map images of rtabmap-loop,
 /// built once for all tests of this file.
 fn files() -> &'static (PathBuf, PathBuf) {
     static FILES: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
     FILES.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap().keep();
-        let images: Vec<_> = image_list(&rtab().join("map.txt"))
+        let images: Vec<_> = image_list(&common::dataset("rtabmap-loop").join("map.txt"))
             .unwrap()
             .into_iter()
             .take(12)
@@ -74,7 +72,7 @@ async fn send(
 }
 
 fn localize(query: &str, accept: &str) -> Request<Body> {
-    let image = std::fs::read(rtab().join("images/5.jpg")).unwrap();
+    let image = std::fs::read(common::dataset("rtabmap-loop").join("images/5.jpg")).unwrap();
     Request::post(format!("/localize?{query}"))
         .header(header::CONTENT_TYPE, "image/jpeg")
         .header(header::ACCEPT, accept)

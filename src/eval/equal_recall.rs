@@ -154,7 +154,10 @@ mod tests {
             &t,
         )
         .unwrap();
-        assert_eq!((e.baseline_recall90_top5, e.baseline_recall_at_1), (0.80, 0.90));
+        assert_eq!(
+            (e.baseline_recall90_top5, e.baseline_recall_at_1),
+            (0.80, 0.90)
+        );
         let keys: Vec<(&str, usize, usize)> = e
             .rows
             .iter()
@@ -175,7 +178,10 @@ mod tests {
         assert_eq!(fractions(&e.rows[1]), [Some(0.6), Some(0.4)]);
         assert_eq!(e.rows[1].cheapest[0].as_ref().unwrap().index, 3);
         assert_eq!(fractions(&e.rows[2]), [None, Some(0.7)]);
-        assert_eq!(e.rows[2].cheapest[1].as_ref().unwrap().label, "peak-mean 0.1 w=20");
+        assert_eq!(
+            e.rows[2].cheapest[1].as_ref().unwrap().label,
+            "peak-mean 0.1 w=20"
+        );
         assert_eq!(fractions(&e.rows[3]), [None, None]);
         assert_eq!(fractions(&e.rows[4]), [Some(1.0), Some(1.0)]);
     }

@@ -7,9 +7,7 @@ mod decode;
 mod extract;
 
 pub use config::{ExtractConfig, SiftParams};
-pub use decode::{
-    DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe,
-};
+pub use decode::{DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe};
 pub use extract::{Descriptors, extract, extract_file};
 
 /// Why an image yielded no descriptors.

@@ -230,8 +230,14 @@ pub async fn serve(
     }
     upkeep.abort();
     let pool = state.pool.clone();
-    if !matches!(tokio::task::spawn_blocking(move || pool.close(grace)).await, Ok(true)) {
-        tracing::warn!("workers still busy {} s after shutdown began; stopping anyway", grace.as_secs());
+    if !matches!(
+        tokio::task::spawn_blocking(move || pool.close(grace)).await,
+        Ok(true)
+    ) {
+        tracing::warn!(
+            "workers still busy {} s after shutdown began; stopping anyway",
+            grace.as_secs()
+        );
     }
     tracing::info!("stopped");
     outcome

@@ -156,7 +156,12 @@ impl WorkerPool {
                     Ok(r) => r,
                     Err(_) => {
                         let unstarted = progress
-                            .compare_exchange(WAITING, ABANDONED, Ordering::AcqRel, Ordering::Acquire)
+                            .compare_exchange(
+                                WAITING,
+                                ABANDONED,
+                                Ordering::AcqRel,
+                                Ordering::Acquire,
+                            )
                             .is_ok();
                         if unstarted {
                             return Err(PoolError::TimedOut);
@@ -196,7 +201,10 @@ impl WorkerPool {
 /// abandoned while waiting is dropped unrun, which frees its place.
 fn work(inbox: &Mutex<mpsc::Receiver<Message>>, busy: &AtomicUsize) {
     loop {
-        let next = inbox.lock().map_err(drop).and_then(|rx| rx.recv().map_err(drop));
+        let next = inbox
+            .lock()
+            .map_err(drop)
+            .and_then(|rx| rx.recv().map_err(drop));
         let Ok(Message::Job(job)) = next else { return };
         let taken = job
             .progress

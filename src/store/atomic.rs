@@ -18,7 +18,9 @@ pub fn write_atomic(
     if let Some(dir) = dir {
         std::fs::create_dir_all(dir).map_err(|e| StoreError::io(dir, e))?;
     }
-    let name = path.file_name().map_or("file".into(), |n| n.to_string_lossy());
+    let name = path
+        .file_name()
+        .map_or("file".into(), |n| n.to_string_lossy());
     let io = |e| StoreError::io(path, e);
     let mut tmp = tempfile::Builder::new()
         .prefix(&format!(".{name}."))
