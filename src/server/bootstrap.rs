@@ -80,7 +80,7 @@ fn build_missing(config: &Config, vocab_missing: bool) -> anyhow::Result<()> {
             images = images.len(),
             words = b.words,
             seed = b.seed,
-            "bootstrap: building the vocabulary (extracting features, then k-means; this takes a few minutes)"
+            "bootstrap: building the vocabulary (extracting features, then k-means; this can take a minute or more)"
         );
         let kmeans = KmeansConfig {
             k: b.words,
