@@ -26,20 +26,40 @@ pub enum PoolError {
     Panicked(String),
 }
 
-/// A job's progress, shared by the caller and the worker that takes it.
+/// A job's progress.
 const WAITING: u8 = 0;
 const STARTED: u8 = 1;
 const ABANDONED: u8 = 2;
 
+/// A job's claim on the pool, shared by its caller and the workers: whether
+/// it was started or abandoned (whichever came first), and its admission
+/// ticket, released by whichever side ends the job. An abandoned job frees
+/// its place at once, though it stays in the queue until a worker skips it.
+struct Place {
+    progress: AtomicU8,
+    ticket: Mutex<Option<OwnedSemaphorePermit>>,
+}
+
+impl Place {
+    /// Move a waiting job to `to`; false when it was started or abandoned.
+    fn claim(&self, to: u8) -> bool {
+        self.progress
+            .compare_exchange(WAITING, to, Ordering::AcqRel, Ordering::Acquire)
+            .is_ok()
+    }
+
+    fn release(&self) {
+        drop(self.ticket.lock().map(|mut t| t.take()));
+    }
+}
+
 /// Runs a job and hands back what delivers its result to the caller.
 type Work = Box<dyn FnOnce() -> Box<dyn FnOnce() + Send> + Send>;
 
-/// A job in the queue: the work, its progress, and its place in the pool
-/// (released when the job is done or dropped unstarted).
+/// A job in the queue.
 struct Job {
     work: Work,
-    progress: Arc<AtomicU8>,
-    ticket: OwnedSemaphorePermit,
+    place: Arc<Place>,
 }
 
 /// What a worker takes from the queue.
@@ -134,7 +154,10 @@ impl WorkerPool {
             .map_err(|_| PoolError::QueueFull)?;
         let waits = self.admitted() > self.workers;
         let (done, result) = oneshot::channel();
-        let progress = Arc::new(AtomicU8::new(WAITING));
+        let place = Arc::new(Place {
+            progress: AtomicU8::new(WAITING),
+            ticket: Mutex::new(Some(ticket)),
+        });
         let work: Work = Box::new(move || {
             let result = catch_unwind(AssertUnwindSafe(job));
             Box::new(move || {
@@ -144,8 +167,7 @@ impl WorkerPool {
         self.jobs
             .send(Message::Job(Job {
                 work,
-                progress: progress.clone(),
-                ticket,
+                place: place.clone(),
             }))
             .map_err(|_| PoolError::Panicked("the workers have stopped".into()))?;
         let result = match deadline.filter(|_| waits) {
@@ -155,15 +177,8 @@ impl WorkerPool {
                 match tokio::time::timeout_at(d, &mut result).await {
                     Ok(r) => r,
                     Err(_) => {
-                        let unstarted = progress
-                            .compare_exchange(
-                                WAITING,
-                                ABANDONED,
-                                Ordering::AcqRel,
-                                Ordering::Acquire,
-                            )
-                            .is_ok();
-                        if unstarted {
+                        if place.claim(ABANDONED) {
+                            place.release();
                             return Err(PoolError::TimedOut);
                         }
                         result.await
@@ -197,8 +212,8 @@ impl WorkerPool {
     }
 }
 
-/// A worker thread: take jobs until told to stop or the pool is gone. A job
-/// abandoned while waiting is dropped unrun, which frees its place.
+/// A worker thread: take jobs until told to stop or the pool is gone, and
+/// skip those abandoned while waiting.
 fn work(inbox: &Mutex<mpsc::Receiver<Message>>, busy: &AtomicUsize) {
     loop {
         let next = inbox
@@ -206,18 +221,14 @@ fn work(inbox: &Mutex<mpsc::Receiver<Message>>, busy: &AtomicUsize) {
             .map_err(drop)
             .and_then(|rx| rx.recv().map_err(drop));
         let Ok(Message::Job(job)) = next else { return };
-        let taken = job
-            .progress
-            .compare_exchange(WAITING, STARTED, Ordering::AcqRel, Ordering::Acquire)
-            .is_ok();
-        if !taken {
+        if !job.place.claim(STARTED) {
             continue;
         }
         busy.fetch_add(1, Ordering::Relaxed);
         let deliver = (job.work)();
         busy.fetch_sub(1, Ordering::Relaxed);
         // The place is free before the caller hears of the result.
-        drop(job.ticket);
+        job.place.release();
         deliver();
     }
 }
