@@ -131,13 +131,13 @@ pub fn run(a: CalibrateArgs) -> anyhow::Result<()> {
             .min_by(|x, y| x.fraction.total_cmp(&y.fraction))
             .ok_or_else(|| anyhow::anyhow!("no rule met the target; nothing written"))?;
         let absolute = |p: &PathBuf| p.canonicalize().unwrap_or_else(|_| p.clone());
-        let fragment = server_config(
+        let config = server_config(
             best,
             &absolute(&a.vocab),
             &absolute(&a.map),
             a.max_disagreement,
         );
-        bowloc::store::write_atomic(out, |w| w.write_all(fragment.as_bytes()))?;
+        bowloc::store::write_atomic(out, |w| w.write_all(config.as_bytes()))?;
         tracing::info!(path = %out.display(), rule = %best.rule, parameter = best.parameter, "calibrated defaults written");
     }
     Ok(())

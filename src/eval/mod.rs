@@ -390,7 +390,10 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
 /// (with `plots`) the figures into `out`.
 pub fn write_outputs(report: &Report, out: &Path, plots: bool) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
-    std::fs::write(out.join("results.md"), table::markdown(report))?;
+    let markdown = table::markdown(report);
+    crate::store::write_atomic(&out.join("results.md"), |w| {
+        w.write_all(markdown.as_bytes())
+    })?;
     table::write_csv(report, &out.join("results.csv"))?;
     table::write_equal_recall_csv(report, &out.join("equal_recall.csv"))?;
     table::write_json(report, &out.join("results.json"))?;

@@ -353,7 +353,13 @@ fn equal_recall_section(e: &EqualRecall) -> String {
 
 /// One CSV row per setting.
 pub fn write_csv(report: &Report, path: &Path) -> anyhow::Result<()> {
-    let mut w = csv::Writer::from_path(path)?;
+    Ok(crate::store::write_atomic(path, |out| {
+        csv_rows(report, out)
+    })?)
+}
+
+fn csv_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::Result<()> {
+    let mut w = csv::Writer::from_writer(out);
     let mut header: Vec<String> = [
         "dataset",
         "rule",
@@ -410,7 +416,13 @@ pub fn write_csv(report: &Report, path: &Path) -> anyhow::Result<()> {
 /// The equal-recall table: one row per rule, warm-up and tolerance; empty
 /// setting and fraction where no setting is within the tolerance.
 pub fn write_equal_recall_csv(report: &Report, path: &Path) -> anyhow::Result<()> {
-    let mut w = csv::Writer::from_path(path)?;
+    Ok(crate::store::write_atomic(path, |out| {
+        equal_recall_rows(report, out)
+    })?)
+}
+
+fn equal_recall_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::Result<()> {
+    let mut w = csv::Writer::from_writer(out);
     w.write_record([
         "dataset",
         "rule",
@@ -442,8 +454,8 @@ pub fn write_equal_recall_csv(report: &Report, path: &Path) -> anyhow::Result<()
 
 /// Every number, as JSON.
 pub fn write_json(report: &Report, path: &Path) -> anyhow::Result<()> {
-    std::fs::write(path, serde_json::to_vec_pretty(report)?)?;
-    Ok(())
+    let json = serde_json::to_vec_pretty(report)?;
+    Ok(crate::store::write_atomic(path, |w| w.write_all(&json))?)
 }
 
 #[cfg(test)]
