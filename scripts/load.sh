@@ -20,11 +20,8 @@ connections=${2:-4}
 seconds=${3:-15}
 repeats=${4:-3}
 queue=${5:-32}
-command -v wrk >/dev/null || { echo "wrk missing: apt-get install wrk" >&2; exit 1; }
-load_map
-tmp=$(mktemp -d)
-trap 'stop_server; rm -rf "$tmp"' EXIT
-wrk_post_script "$tmp/post.lua" "$DATASET/images/50.jpg"
+load_prepare
+tmp=$TMP
 
 # run WORKERS: one server, one wrk run; appends "WORKERS RPS" to $tmp/rps.
 run() {

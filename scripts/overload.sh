@@ -26,14 +26,11 @@ connections=${1:-64}
 seconds=${2:-20}
 workers=${3:-2}
 queue=${4:-4}
-command -v wrk >/dev/null || { echo "wrk missing: apt-get install wrk" >&2; exit 1; }
-load_map
-tmp=$(mktemp -d)
-trap 'stop_server; rm -rf "$tmp"' EXIT
+load_prepare
+tmp=$TMP
 server_config "$workers" "$queue" >"$tmp/config.toml"
 start_server "$tmp/config.toml" "$tmp/server.log"
-image="$DATASET/images/50.jpg"
-wrk_post_script "$tmp/post.lua" "$image"
+image=$LOAD_IMAGE
 url="http://$SERVER_ADDR/localize"
 rss_start=$(server_rss_kib)
 wrk -t 1 -c 2 -d 5s -s "$tmp/post.lua" "$url" >"$tmp/warmup.txt"

@@ -15,13 +15,10 @@ requests=${1:-10000}
 round_seconds=${2:-30}
 workers=${3:-2}
 connections=${4:-4}
-command -v wrk >/dev/null || { echo "wrk missing: apt-get install wrk" >&2; exit 1; }
-load_map
-tmp=$(mktemp -d)
-trap 'stop_server; rm -rf "$tmp"' EXIT
+load_prepare
+tmp=$TMP
 server_config "$workers" 32 >"$tmp/config.toml"
 start_server "$tmp/config.toml" "$tmp/server.log"
-wrk_post_script "$tmp/post.lua" "$DATASET/images/50.jpg"
 echo "workers=$workers connections=$connections requests=$requests round_seconds=$round_seconds"
 echo "round requests_total non_2xx_total requests_per_s server_rss_kib"
 echo "0 0 0 - $(server_rss_kib)"

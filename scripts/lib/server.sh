@@ -14,6 +14,11 @@
 #                            a loopback configuration for the map in DIR
 #                            (default data/load), printed
 #   wrk_post_script FILE IMAGE   a wrk Lua script that posts IMAGE (JPEG)
+#   load_prepare             for the wrk scripts: wrk present, the load map
+#                            built, a temporary folder in TMP (removed, with
+#                            the server stopped, on exit) holding post.lua,
+#                            which posts LOAD_IMAGE (one of rtabmap-loop's
+#                            queries)
 
 BOWLOC_BIN=./target/release/bowloc
 DATASET=../shared/datasets/rtabmap-loop
@@ -92,4 +97,14 @@ wrk.body = f:read("*all")
 f:close()
 wrk.headers["Content-Type"] = "image/jpeg"
 LUA
+}
+
+LOAD_IMAGE=$DATASET/images/50.jpg
+
+load_prepare() {
+  command -v wrk >/dev/null || { echo "wrk missing: apt-get install wrk" >&2; exit 1; }
+  load_map
+  TMP=$(mktemp -d)
+  trap 'stop_server; rm -rf "$TMP"' EXIT
+  wrk_post_script "$TMP/post.lua" "$LOAD_IMAGE"
 }
