@@ -1,6 +1,6 @@
 //! `bowloc query`: localize image files and print the answers as JSON.
 
-use super::args::SearchArgs;
+use super::args::{SearchArgs, VerifyArgs};
 use bowloc::pipeline::Localizer;
 use clap::Args;
 use std::path::PathBuf;
@@ -18,10 +18,13 @@ pub struct QueryArgs {
     images: Vec<PathBuf>,
     #[command(flatten)]
     search: SearchArgs,
+    #[command(flatten)]
+    verify: VerifyArgs,
 }
 
 pub fn run(a: QueryArgs) -> anyhow::Result<()> {
-    let localizer = Localizer::open(&a.vocab, &a.map, true)?;
+    let mut localizer = Localizer::open(&a.vocab, &a.map, true)?;
+    localizer.set_verify(a.verify.params()?);
     let options = a.search.options()?;
     let mut answers = Vec::with_capacity(a.images.len());
     for path in &a.images {

@@ -10,7 +10,9 @@
 //! 3. [`sweep`]: calibrate the grids, then vote every setting × run × query;
 //! 4. [`summary`] (with the definitions in [`metrics`]), [`recommend`] and
 //!    [`equal_recall`];
-//! 5. [`table`] and [`plots`]: the outputs.
+//! 5. [`verify`] (when asked): the full search and the explicit settings
+//!    re-ranked by geometric verification, with and without side by side;
+//! 6. [`table`] and [`plots`]: the outputs.
 
 pub mod cache;
 pub mod equal_recall;
@@ -21,6 +23,7 @@ pub mod summary;
 pub mod sweep;
 pub mod table;
 pub mod timing;
+pub mod verify;
 
 use crate::dataset::Dataset;
 use crate::features::ExtractConfig;
@@ -79,6 +82,8 @@ pub struct EvalConfig {
     pub plots: bool,
     /// The command line, recorded in the outputs.
     pub command: String,
+    /// Also verify the full search and the explicit settings geometrically.
+    pub verify: Option<crate::geometry::verify::VerifyParams>,
 }
 
 /// The dataset as evaluated.
@@ -123,6 +128,8 @@ pub struct Stages {
     pub quantize_s: f64,
     pub calibrate_s: f64,
     pub sweep_s: f64,
+    /// The verification pass (0 without).
+    pub verify_s: f64,
     pub total_s: f64,
 }
 
@@ -156,6 +163,8 @@ pub struct Report {
     /// Features each rule needs at equal recall.
     pub equal_recall: Option<EqualRecall>,
     pub histogram: Option<HistogramInfo>,
+    /// The verification pass, when asked for.
+    pub verification: Option<verify::VerificationReport>,
 }
 
 /// The grids of the rules asked for, the full search first.
@@ -346,6 +355,45 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         }
     });
 
+    let verification = match &config.verify {
+        None => None,
+        Some(params) => {
+            let fit = crate::features::fit::OpenCvFit::new(params.fit());
+            let queries: Vec<verify::QueryGeometry> = (0..query_desc.len())
+                .map(|q| {
+                    let keypoints = query_desc.keypoints(q);
+                    words[q].iter().copied().zip(keypoints).collect()
+                })
+                .collect();
+            let mut indices = vec![0];
+            indices.extend(explicit.iter().copied().filter(|&i| i != 0));
+            let bar = progress_bar(indices.len() as u64, "verifying");
+            let rows = indices
+                .into_iter()
+                .map(|i| {
+                    let row = verify::verify_setting(
+                        &map,
+                        &queries,
+                        &dataset.truth,
+                        &summaries[i].label,
+                        i,
+                        &outcomes[i],
+                        &fit,
+                        params,
+                    );
+                    bar.inc(1);
+                    row
+                })
+                .collect();
+            bar.finish_and_clear();
+            Some(verify::VerificationReport {
+                params: params.clone(),
+                rows,
+            })
+        }
+    };
+    stages.verify_s = seconds_since(&mut clock);
+
     let mean_features = metrics::mean(&words.iter().map(|w| w.len() as f64).collect::<Vec<_>>());
     stages.total_s = started.elapsed().as_secs_f64();
     let report = Report {
@@ -381,6 +429,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         recommendation,
         equal_recall,
         histogram,
+        verification,
     };
     write_outputs(&report, &config.out, config.plots)?;
     Ok(report)

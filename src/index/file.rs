@@ -8,7 +8,8 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 const MAGIC: [u8; 8] = *b"BOWLOCMA";
-const VERSION: u32 = 1;
+/// 2: per-image geometry (`geometry.offsets`, `geometry.features`).
+const VERSION: u32 = 2;
 
 /// What a map is.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -42,6 +43,8 @@ pub(super) fn save(map: &MapIndex, path: &Path) -> Result<(), StoreError> {
         .u64s("places.offsets", v.places.offsets)
         .bytes("places.bytes", v.places.bytes)
         .f64s("poses", v.poses)
+        .u64s("geometry.offsets", v.geometry_offsets)
+        .u32s("geometry.features", bytemuck::cast_slice(v.geometry))
         .write_atomic(path)?;
     Ok(())
 }
@@ -64,11 +67,26 @@ pub(super) fn view(store: &Store) -> Result<MapView<'_>, StoreError> {
             bytes: store.bytes("places.bytes")?,
         },
         poses: store.f64s("poses")?,
+        geometry_offsets: store.u64s("geometry.offsets")?,
+        geometry: bytemuck::try_cast_slice(store.u32s("geometry.features")?)
+            .map_err(|_| store.invalid("geometry.features is not whole features"))?,
     })
 }
 
 pub(super) fn open(path: &Path, verify: bool) -> Result<MapIndex, StoreError> {
-    let store = Store::open(path, MAGIC, "map", VERSION, verify)?;
+    let store = match Store::open(path, MAGIC, "map", VERSION, verify) {
+        Err(StoreError::WrongVersion { found, .. }) if found < VERSION => {
+            return Err(StoreError::Invalid {
+                path: path.to_path_buf(),
+                detail: format!(
+                    "map format version {found} is older than this build's version {VERSION} \
+                     (which adds the geometry that verification needs); rebuild the map with \
+                     `bowloc map build --vocab VOCAB --images IMAGES --out MAP`"
+                ),
+            });
+        }
+        other => other?,
+    };
     let meta: MapMeta = store.json("meta")?;
     {
         let v = view(&store)?;
@@ -99,6 +117,14 @@ pub(super) fn open(path: &Path, verify: bool) -> Result<MapIndex, StoreError> {
                 "per-image arrays do not hold {} images",
                 meta.images
             ));
+        }
+        let g = v.geometry_offsets;
+        if g.len() != meta.images + 1
+            || g.first().copied() != Some(0)
+            || g.last().copied() != Some(v.geometry.len() as u64)
+            || g.windows(2).any(|w| w[0] > w[1])
+        {
+            return bad("geometry offsets disagree with the features stored".into());
         }
         v.names
             .validate()
