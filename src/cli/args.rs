@@ -117,11 +117,14 @@ pub struct VerifyArgs {
     #[arg(long, default_value = "homography")]
     pub model: Model,
     /// Robust estimator: ransac or magsac.
-    #[arg(long, default_value = "ransac")]
+    #[arg(long, default_value = "magsac")]
     pub estimator: Estimator,
     /// Inlier threshold in pixels of the extraction frame.
     #[arg(long, default_value_t = VerifyParams::default().threshold_px)]
     pub inlier_px: f64,
+    /// Iteration cap of the robust estimator.
+    #[arg(long, default_value_t = VerifyParams::default().max_iters)]
+    pub fit_iters: u32,
 }
 
 impl VerifyArgs {
@@ -134,6 +137,7 @@ impl VerifyArgs {
             model: self.model,
             estimator: self.estimator,
             threshold_px: self.inlier_px,
+            max_iters: self.fit_iters,
             ..VerifyParams::default()
         };
         p.validate().map_err(anyhow::Error::msg)?;

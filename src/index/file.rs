@@ -138,3 +138,56 @@ pub(super) fn open(path: &Path, verify: bool) -> Result<MapIndex, StoreError> {
         meta,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Keypoint;
+    use crate::index::{ImageWords, MapBuilder};
+
+    fn kp(x: f32, y: f32) -> Keypoint {
+        Keypoint {
+            x,
+            y,
+            size: 3.0,
+            angle: 45.0,
+            response: 0.1,
+        }
+    }
+
+    #[test]
+    fn geometry_survives_save_and_open() {
+        let mut b = MapBuilder::new(4);
+        b.add(ImageWords::with_geometry(
+            "a",
+            &[3, 1, 1],
+            &[kp(1.0, 2.0), kp(3.0, 4.0), kp(5.0, 6.0)],
+        ));
+        b.add(ImageWords::from_words("no features", &[]));
+        b.add(ImageWords::with_geometry("c", &[2], &[kp(7.0, 8.0)]));
+        let built = b.build("t", "0", None);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.bowmap");
+        built.save(&path).unwrap();
+        let map = MapIndex::open(&path, true).unwrap();
+        let a = map.geometry(0);
+        assert_eq!(a.iter().map(|f| f.word).collect::<Vec<_>>(), vec![1, 1, 3]);
+        assert_eq!(a[2].point(), [1.0, 2.0]);
+        assert!(map.geometry(1).is_empty());
+        assert_eq!(map.geometry(2)[0].point(), [7.0, 8.0]);
+        assert!(map.geometry(99).is_empty());
+    }
+
+    #[test]
+    fn an_older_map_is_refused_with_how_to_rebuild_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("old.bowmap");
+        StoreWriter::new(MAGIC, 1)
+            .json("meta", &MapMeta::default())
+            .write_atomic(&path)
+            .unwrap();
+        let e = MapIndex::open(&path, true).err().unwrap().to_string();
+        assert!(e.contains("bowloc map build"), "{e}");
+        assert!(e.contains("version 1"), "{e}");
+    }
+}
