@@ -315,6 +315,8 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     let map = cache::map_index(&config.cache, &vocab, &map_desc, &dataset.name)?;
     stages.map_s = seconds_since(&mut clock);
 
+    // one OpenCV thread per query: the sweep already runs one query per core
+    crate::features::set_opencv_threads(1);
     let quantizer = vocab.exact_quantizer();
     let (mut queries, costs) = quantize_queries(&query_desc, &quantizer, "quantizing queries");
     // Geometric verification as the service does it: for the `verified`

@@ -129,7 +129,7 @@ impl Default for VerifyParams {
             estimator: Estimator::Magsac,
             threshold_px: 8.0,
             confidence: 0.995,
-            max_iters: 2000,
+            max_iters: 500,
         }
     }
 }
@@ -226,8 +226,10 @@ pub fn count_inliers(c: &Correspondences, fit: &dyn ModelFit, min_inliers: usize
         inliers: 0,
         verified: false,
     };
+    // fewer matches than the model needs, or than a verified candidate has
+    // inliers: no fit can verify it, so none is run
     let needed = fit.params().model.min_matches();
-    if matches < needed
+    if matches < needed.max(min_inliers)
         || distinct(c.query.iter().copied()) < needed
         || distinct(c.map.iter().copied()) < needed
     {
