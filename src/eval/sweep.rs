@@ -3,11 +3,12 @@
 //! found for a dataset, and running every setting over every Monte Carlo run
 //! and query on pre-quantized words.
 
+use crate::calibrate::median_features;
 use crate::index::MapIndex;
-use crate::search::{Ranked, RuleSpec, SearchOptions, search_words};
+use crate::search::{Ranked, RuleSpec, SearchOptions, StopKind, search_words};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Serialize, Serializer};
 
 /// How a rule's parameter values are chosen.
 #[derive(Debug, Clone, Copy)]
@@ -108,9 +109,25 @@ pub struct Setting {
     pub min_features: usize,
     /// The fraction of features its parameter was calibrated for, if any.
     pub target: Option<f64>,
+    /// Why this grid point does not measure the rule (calibration hit a
+    /// search bound, or the warm-up leaves the rule unconsulted): such points
+    /// are shown, marked, but kept out of the equal-recall tables and the
+    /// recommendation.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub degenerate: Option<String>,
 }
 
 impl Setting {
+    /// A setting at warm-up `min_features`, not calibrated.
+    pub fn new(rule: RuleSpec, min_features: usize) -> Self {
+        Self {
+            rule,
+            min_features,
+            target: None,
+            degenerate: None,
+        }
+    }
+
     /// The rule's parameter, for rules that take one.
     pub fn parameter(&self) -> Option<f64> {
         self.rule.parameter_name().map(|_| self.rule.parameter)
@@ -163,11 +180,10 @@ pub fn parse_setting(spec: &str, warmup: usize) -> anyhow::Result<Setting> {
         ),
         None => (body.trim(), None),
     };
-    Ok(Setting {
-        rule: RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?,
+    Ok(Setting::new(
+        RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?,
         min_features,
-        target: None,
-    })
+    ))
 }
 
 /// A parameter value as tables show it (up to 3 significant digits).
@@ -178,11 +194,22 @@ pub fn format_parameter(p: f64) -> String {
 
 /// `v` rounded to `digits` significant digits.
 pub fn round_significant(v: f64, digits: i32) -> f64 {
+    round_with(v, digits, f64::round)
+}
+
+/// `v` rounded to `digits` significant digits, upwards (`up`) or downwards.
+pub fn round_significant_toward(v: f64, digits: i32, up: bool) -> f64 {
+    round_with(v, digits, if up { f64::ceil } else { f64::floor })
+}
+
+fn round_with(v: f64, digits: i32, round: fn(f64) -> f64) -> f64 {
     if v == 0.0 || !v.is_finite() {
         return v;
     }
     let scale = 10f64.powi(digits - 1 - v.abs().log10().floor() as i32);
-    (v * scale).round() / scale
+    let r = round(v * scale) / scale;
+    // dividing back can land one ulp off: keep the shortest form
+    format!("{r:.12e}").parse().unwrap_or(r)
 }
 
 /// The run number the calibration pass uses: its permutations are not those
@@ -195,14 +222,25 @@ pub fn seed(run: u32, query: usize) -> u64 {
     ((run as u64) << 32) | query as u64
 }
 
-/// The result of one search, kept for the metrics.
-#[derive(Debug, Clone)]
+/// The result of one search, kept for the metrics and written, per query,
+/// into `results.json` so it can be re-scored.
+#[derive(Debug, Clone, Serialize)]
 pub struct Outcome {
+    /// Ranked candidates as `[id, score]` pairs.
+    #[serde(serialize_with = "id_score_pairs")]
     pub candidates: Vec<Ranked>,
+    /// Features voted when the search ended: its stop point.
     pub used: u32,
     pub total: u32,
+    /// Why it ended.
+    pub stop: StopKind,
     /// Time spent voting (and checking the rule), in milliseconds.
+    #[serde(skip)]
     pub vote_ms: f32,
+}
+
+fn id_score_pairs<S: Serializer>(list: &[Ranked], s: S) -> Result<S::Ok, S::Error> {
+    s.collect_seq(list.iter().map(|r| (r.id, r.score)))
 }
 
 impl Outcome {
@@ -228,6 +266,7 @@ pub fn search_one(
         candidates: o.candidates,
         used: o.features_used as u32,
         total: o.features_total as u32,
+        stop: o.stop.kind,
         vote_ms: o.timings.vote.as_secs_f32() * 1e3,
     }
 }
@@ -251,6 +290,10 @@ pub struct Calibration {
     pub parameter: f64,
     /// Mean fraction it gave in the calibration run.
     pub fraction: f64,
+    /// Why the value does not measure the rule, if it does not (see
+    /// [`Setting::degenerate`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub degenerate: Option<String>,
 }
 
 /// Stop bisecting once the fraction is this close to the target.
@@ -330,7 +373,11 @@ pub fn bisect_edge(
 
 /// Parameters of `rule` (grid `Calibrated { lo, hi, whole }`) at warm-up
 /// `min_features` for each target fraction, rounded to 3 significant digits,
-/// from one calibration run over all queries.
+/// from one calibration run over all queries. A value is marked degenerate
+/// when the bisection ended on a bound of `[lo, hi]` (the target is out of
+/// the rule's reach: the value says nothing about the rule) or when the
+/// warm-up is at least the median query's feature count (the rule is not
+/// consulted on most queries).
 pub fn calibrate(
     map: &MapIndex,
     queries: &[Vec<u32>],
@@ -341,11 +388,10 @@ pub fn calibrate(
     bar: &ProgressBar,
 ) -> anyhow::Result<Vec<Calibration>> {
     let setting = |p: f64| -> anyhow::Result<Setting> {
-        Ok(Setting {
-            rule: RuleSpec::new(rule, Some(p)).map_err(anyhow::Error::msg)?,
+        Ok(Setting::new(
+            RuleSpec::new(rule, Some(p)).map_err(anyhow::Error::msg)?,
             min_features,
-            target: None,
-        })
+        ))
     };
     setting(lo)?;
     setting(hi)?;
@@ -359,16 +405,39 @@ pub fn calibrate(
         memo.lock().expect("not poisoned").insert(p.to_bits(), v);
         v
     };
+    let lengths: Vec<usize> = queries.iter().map(Vec::len).collect();
+    let median = median_features(&lengths);
     let mut out = Vec::with_capacity(targets.len());
     for &target in targets {
-        let (p, _) = bisect(target, lo, hi, whole, &f);
-        let p = if whole { p } else { round_significant(p, 3) };
+        let (raw, _) = bisect(target, lo, hi, whole, &f);
+        let p = if whole {
+            raw
+        } else {
+            round_significant(raw, 3)
+        };
+        let fraction = f(p);
+        let degenerate = if min_features >= median {
+            Some(format!(
+                "warm-up {min_features} ≥ the median query's {median} features"
+            ))
+        } else if raw == lo || raw == hi {
+            Some(format!(
+                "target {:.0} % out of reach: bisection ended on the search bound {} ({:.1} % \
+                 of the features)",
+                100.0 * target,
+                format_parameter(raw),
+                100.0 * fraction
+            ))
+        } else {
+            None
+        };
         out.push(Calibration {
             rule: rule.to_owned(),
             min_features,
             target,
             parameter: p,
-            fraction: f(p),
+            fraction,
+            degenerate,
         });
         bar.inc(1);
     }
@@ -391,18 +460,10 @@ pub fn plan(
     let spec = |name: &str, p: Option<f64>| RuleSpec::new(name, p).map_err(anyhow::Error::msg);
     for g in grids {
         match g.grid {
-            Grid::Single => settings.push(Setting {
-                rule: spec(g.rule, None)?,
-                min_features: first,
-                target: None,
-            }),
+            Grid::Single => settings.push(Setting::new(spec(g.rule, None)?, first)),
             Grid::Values(values) => {
                 for &v in values {
-                    settings.push(Setting {
-                        rule: spec(g.rule, Some(v))?,
-                        min_features: first,
-                        target: None,
-                    });
+                    settings.push(Setting::new(spec(g.rule, Some(v))?, first));
                 }
             }
             Grid::Calibrated { lo, hi, whole } => {
@@ -415,9 +476,9 @@ pub fn plan(
                         }
                         seen.push(c.parameter);
                         settings.push(Setting {
-                            rule: spec(g.rule, Some(c.parameter))?,
-                            min_features: w,
                             target: Some(c.target),
+                            degenerate: c.degenerate.clone(),
+                            ..Setting::new(spec(g.rule, Some(c.parameter))?, w)
                         });
                     }
                     calibrations.extend(found);
@@ -550,16 +611,8 @@ mod tests {
             .map(|q| (0..40).map(|i| ((i * 7 + q) % 8) as u32).collect())
             .collect();
         let settings = vec![
-            Setting {
-                rule: RuleSpec::new("none", None).unwrap(),
-                min_features: 0,
-                target: None,
-            },
-            Setting {
-                rule: RuleSpec::new("fixed", Some(0.5)).unwrap(),
-                min_features: 0,
-                target: None,
-            },
+            Setting::new(RuleSpec::new("none", None).unwrap(), 0),
+            Setting::new(RuleSpec::new("fixed", Some(0.5)).unwrap(), 0),
         ];
         let bar = ProgressBar::hidden();
         let r = run_all(&map, &queries, &settings, 3, 2, &bar);
