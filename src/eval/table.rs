@@ -121,10 +121,6 @@ fn paper_rows(columns: &[&SettingSummary], parameter: &str) -> Vec<Vec<String>> 
     }));
     rows.push(row("recall@1".into(), &|s| pct_seeds(&s.recall_at_1)));
     rows.push(row("recall@5".into(), &|s| pct_seeds(&s.recall_at_5)));
-    rows.push(row(
-        "search ms (quantize + vote), median / p95".into(),
-        &|s| ms(s.time_ms.search),
-    ));
     rows
 }
 
@@ -160,9 +156,9 @@ pub fn markdown(report: &Report) -> String {
          (k-means seeds {}), {} runs (random feature orders), {} features per query on average \
          (median {}; warm-up `auto` = {}). Recall at 90 % precision is computed per run, then \
          averaged over runs; a figure reads `mean ± std` over the vocabulary seeds, and the \
-         spread over feature orders is given apart; all rates in %. Wall time {:.1} s \
-         (extract {:.1} s, vocabulary {:.1} s, map {:.1} s, quantize queries {:.1} s, \
-         calibrate {:.1} s, sweep {:.1} s).\n",
+         spread over feature orders is given apart; all rates in %. Times are measured, so \
+         they differ from run to run: they are all in the section \"Time per query and \
+         stage\" (and `results.csv`); every other figure is reproducible.\n",
         d.map_images,
         d.queries,
         d.with_match,
@@ -173,13 +169,6 @@ pub fn markdown(report: &Report) -> String {
         d.mean_features.round(),
         d.median_features,
         c.auto_warmup,
-        report.stages.total_s,
-        report.stages.extract_s,
-        report.stages.vocabulary_s,
-        report.stages.map_s,
-        report.stages.quantize_s,
-        report.stages.calibrate_s,
-        report.stages.sweep_s,
     );
     let Some(base) = report
         .settings
@@ -278,7 +267,7 @@ fn explicit_section(report: &Report, base: &SettingSummary) -> String {
         .collect();
     let mut rows = paper_rows(&columns, "parameter");
     rows.insert(
-        rows.len() - 3,
+        rows.len() - 2,
         std::iter::once("warm-up".to_owned())
             .chain(columns.iter().map(|c| c.setting.min_features.to_string()))
             .collect(),
@@ -340,6 +329,12 @@ fn warmup_section(report: &Report) -> String {
         }
         s += &markdown_table(&header, &rows);
         s += "\n";
+        let points: Vec<&SettingSummary> = c
+            .warmups
+            .iter()
+            .flat_map(|&w| c.targets.iter().filter_map(move |&t| by_target(w, t)))
+            .collect();
+        s += &degenerate_note(&points);
     }
     s
 }
@@ -391,12 +386,22 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
             ]
         })
         .collect();
+    let t = &report.stages;
     format!(
-        "### Time per query and stage (ms, median / p95 over queries × runs)\n\n\
+        "### Time per query and stage (ms, median / p95 over seeds × queries × runs)\n\n\
+         Wall time {:.1} s (extract {:.1} s, vocabularies {:.1} s, maps {:.1} s, quantize \
+         queries {:.1} s, calibrate {:.1} s, sweep {:.1} s). \
          Extract = decode + SIFT, measured once per query while extracting; quantize = the \
          blocked exact quantizer's measured cost per feature × features used; vote = voting \
          and rule checks inside the search. Measured on this machine with all cores busy \
-         (queries run in parallel).\n\n{}\n",
+         (queries run in parallel); every setting's times are in `results.csv`.\n\n{}\n",
+        t.total_s,
+        t.extract_s,
+        t.vocabulary_s,
+        t.map_s,
+        t.quantize_s,
+        t.calibrate_s,
+        t.sweep_s,
         markdown_table(&header, &rows)
     )
 }
