@@ -244,11 +244,11 @@ pub struct Transfer {
 /// check (all of them without one), the one using the fewest pseudo-query
 /// features. With none passing, an error naming the rules and their real
 /// disagreement, unless `force`, which takes the cheapest calibrated rule.
-pub fn choose<'a>(
-    chosen: &'a [(Calibrated, Option<Transfer>)],
+pub fn choose(
+    chosen: &[(Calibrated, Option<Transfer>)],
     max_disagreement: f64,
     force: bool,
-) -> anyhow::Result<&'a Calibrated> {
+) -> anyhow::Result<&Calibrated> {
     let cheapest = |passing: bool| {
         chosen
             .iter()

@@ -574,6 +574,9 @@ mod tests {
     #[test]
     fn rounding_and_seeds() {
         assert_eq!(round_significant(0.012345, 3), 0.0123);
+        assert_eq!(round_significant_toward(0.012301, 3, true), 0.0124);
+        assert_eq!(round_significant_toward(0.012399, 3, false), 0.0123);
+        assert_eq!(round_significant_toward(742.2, 3, true), 743.0);
         assert_eq!(round_significant(98765.0, 3), 98800.0);
         assert_eq!(format_parameter(0.05), "0.05");
         assert_ne!(seed(0, 1), seed(1, 0));
@@ -624,6 +627,46 @@ mod tests {
             assert!(run.iter().all(|o| o.used == 20 && o.candidates.len() <= 2));
         }
         assert_eq!(mean_fraction(&map, &queries, &settings[1], 0), 0.5);
+    }
+
+    #[test]
+    fn unreachable_targets_and_large_warm_ups_are_marked_degenerate() {
+        let map = toy_map();
+        let queries: Vec<Vec<u32>> = (0..6)
+            .map(|q| (0..40).map(|i| ((i * 5 + q * 3) % 8) as u32).collect())
+            .collect();
+        let bar = ProgressBar::hidden();
+        // `fixed` cannot use less than 20 % when its range starts at 0.2:
+        // the bisection ends on that bound.
+        let found = calibrate(
+            &map,
+            &queries,
+            "fixed",
+            (0.2, 1.0, false),
+            0,
+            &[0.1, 0.5],
+            &bar,
+        )
+        .unwrap();
+        let why = found[0].degenerate.as_deref().unwrap();
+        assert!(why.contains("search bound 0.2"), "{why}");
+        assert_eq!(found[1].degenerate, None);
+        // A warm-up of all 40 features: every point is degenerate, and the
+        // plan carries the mark to its settings.
+        let (settings, _) = plan(
+            &map,
+            &queries,
+            &[rule_grid("stable-peak").unwrap()],
+            &[40],
+            &[0.5],
+            &bar,
+        )
+        .unwrap();
+        let why = settings[0].degenerate.as_deref().unwrap();
+        assert!(
+            why.contains("warm-up 40 ≥ the median query's 40 features"),
+            "{why}"
+        );
     }
 
     #[test]
