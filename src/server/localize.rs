@@ -6,6 +6,7 @@ use super::AppState;
 use super::errors::{ApiError, ErrorBody};
 use super::proto;
 use super::workers::PoolError;
+use crate::features::TileGrid;
 use crate::report::Localization;
 use crate::search::stop::{rule_info, rule_names};
 use crate::search::{RuleSpec, SearchOptions};
@@ -54,6 +55,10 @@ pub struct LocalizeParams {
     /// rule, to 0 when it names another.
     #[param(value_type = Option<u32>, minimum = 0)]
     pub min_features: Option<String>,
+    /// Streaming extraction's tile grid, `COLSxROWS` or `COLSxROWS+MARGIN`
+    /// (`1x1`: extract the whole image first). Default: the configured grid.
+    #[param(value_type = Option<String>, example = "2x2+24")]
+    pub tiles: Option<String>,
 }
 
 /// What a request may ask for within the configuration.
@@ -116,6 +121,17 @@ impl LocalizeParams {
             o.min_score = s as f32;
         }
         Ok(o)
+    }
+
+    /// The tile grid asked for, or `default`.
+    pub fn tiles(&self, default: TileGrid) -> Result<TileGrid, ApiError> {
+        match &self.tiles {
+            None => Ok(default),
+            Some(v) => v
+                .trim()
+                .parse()
+                .map_err(|e: String| ApiError::invalid_parameter("tiles", e)),
+        }
     }
 
     /// The rule and its parameter.
@@ -378,7 +394,9 @@ pub async fn localize(
     let deadline = arrived + state.config.deadline();
     let localizer = state.localizer()?;
     let format = Format::from_accept(request.headers());
-    let mut options = LocalizeParams::from_query(query.as_deref())?.options(&state.defaults)?;
+    let params = LocalizeParams::from_query(query.as_deref())?;
+    let mut options = params.options(&state.defaults)?;
+    let tiles = params.tiles(localizer.tiles)?;
     options.deadline = Some(deadline);
     let image = read_image(&state, request).await?;
     // Format and pixel count from the header, before the image takes a worker.
@@ -386,7 +404,7 @@ pub async fn localize(
     let answer = state
         .pool
         .run(Some(tokio::time::Instant::from_std(deadline)), move || {
-            localizer.localize(&image, &options)
+            localizer.localize_tiled(&image, &options, tiles)
         })
         .await
         .map_err(|e| match e {
