@@ -37,7 +37,8 @@ pub struct EvalArgs {
     /// Setting of the histogram figure: RULE or RULE=VALUE (default: the recommended one).
     #[arg(long)]
     histogram: Option<String>,
-    /// Vocabularies to train: N (k-means seeds 1..=N) or a list of seeds `a,b,…`.
+    /// Vocabularies to train: N (k-means seeds 1..=N) or a list of seeds `a,b,…`
+    /// (a seed repeated counts once: `7,7` is seed 7 alone).
     #[arg(long, value_delimiter = ',', default_value = "3")]
     vocab_seeds: Vec<u64>,
     /// Use this vocabulary instead of training one (its extraction settings are used).
@@ -65,7 +66,12 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| "dataset".into());
     let seeds = match a.vocab_seeds.as_slice() {
         [n] => (1..=*n).collect(),
-        list => list.to_vec(),
+        list => list.iter().fold(Vec::new(), |mut seeds, &s| {
+            if !seeds.contains(&s) {
+                seeds.push(s);
+            }
+            seeds
+        }),
     };
     let config = EvalConfig {
         words: a.words,
