@@ -115,6 +115,17 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
             100.0 * r.baseline_recall_at_1
         );
     }
+    let degenerate = report
+        .settings
+        .iter()
+        .filter(|s| s.setting.degenerate.is_some())
+        .count();
+    if degenerate > 0 {
+        println!(
+            "{degenerate} degenerate grid points (target out of reach or warm-up too long), \
+             marked † in results.md and left out of the equal-recall tables and the recommendation"
+        );
+    }
     if let Some(why) = &report.no_recommendation {
         println!("no recommendation: {why}");
     }
