@@ -125,27 +125,58 @@ fn warmup(table: &str) -> usize {
         .unwrap()
 }
 
+/// A small-image map with queries from `queries_from`, its vocabulary and
+/// map, and where `--out` goes.
+struct Case {
+    dir: tempfile::TempDir,
+    data: PathBuf,
+    vocab: String,
+    map: String,
+}
+
+impl Case {
+    fn new(queries_from: &str, count: usize) -> Self {
+        let dir = tempfile::tempdir().unwrap();
+        let data = small_dataset(dir.path(), queries_from, count);
+        let (vocab, map) = vocab_and_map(&data);
+        Self {
+            dir,
+            data,
+            vocab,
+            map,
+        }
+    }
+
+    fn out(&self) -> String {
+        let out = self.dir.path().join("calibrated.toml");
+        out.to_str().unwrap().to_owned()
+    }
+
+    /// `bowloc calibrate` on this map, 2 runs, target 0.05, then `extra`.
+    fn calibrate(&self, extra: &[&str]) -> Output {
+        let args = [
+            "calibrate",
+            "--vocab",
+            &self.vocab,
+            "--map",
+            &self.map,
+            "--runs",
+            "2",
+            "--max-disagreement",
+            "0.05",
+        ];
+        bowloc(&[&args[..], extra].concat())
+    }
+}
+
 #[test]
 fn small_images_calibrate_with_an_adapted_warm_up_or_say_why() {
-    let dir = tempfile::tempdir().unwrap();
-    let data = small_dataset(dir.path(), "rtabmap-loop", 44);
-    let (vocab, map) = vocab_and_map(&data);
-    let out = dir.path().join("calibrated.toml");
-    let out = out.to_str().unwrap();
-    let common = [
-        "calibrate",
-        "--vocab",
-        &vocab,
-        "--map",
-        &map,
-        "--runs",
-        "2",
-        "--max-disagreement",
-        "0.05",
-    ];
+    let case = Case::new("rtabmap-loop", 44);
+    let out = case.out();
+    let out = out.as_str();
 
     // The old fixed warm-up of 100 is more than these pseudo-queries have.
-    let o = bowloc(&[&common[..], &["--min-features", "100", "--out", out]].concat());
+    let o = case.calibrate(&["--min-features", "100", "--out", out]);
     let stdout = String::from_utf8_lossy(&o.stdout);
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success(), "{stdout}");
@@ -158,13 +189,7 @@ fn small_images_calibrate_with_an_adapted_warm_up_or_say_why() {
 
     // The adapted warm-up: either a rule that stops early and transfers, or
     // a refusal naming why.
-    let o = bowloc(
-        &[
-            &common[..],
-            &["--dataset", data.to_str().unwrap(), "--out", out],
-        ]
-        .concat(),
-    );
+    let o = case.calibrate(&["--dataset", case.data.to_str().unwrap(), "--out", out]);
     let stdout = String::from_utf8_lossy(&o.stdout);
     let stderr = String::from_utf8_lossy(&o.stderr);
     let w = warmup(&stdout);
@@ -194,33 +219,21 @@ fn small_images_calibrate_with_an_adapted_warm_up_or_say_why() {
 
 #[test]
 fn out_refuses_a_rule_that_does_not_transfer_unless_forced() {
-    let dir = tempfile::tempdir().unwrap();
     // The map is the corridor; the "real" queries are another place.
-    let data = small_dataset(dir.path(), "gardens-point", 40);
-    let (vocab, map) = vocab_and_map(&data);
-    let out = dir.path().join("calibrated.toml");
-    let out = out.to_str().unwrap();
+    let case = Case::new("gardens-point", 40);
+    let out = case.out();
     let args = [
-        "calibrate",
-        "--vocab",
-        &vocab,
-        "--map",
-        &map,
-        "--runs",
-        "2",
-        "--max-disagreement",
-        "0.05",
         // on this map of small corridor images stable-peak's pseudo-queries
         // are far from the other place's queries (measured: 0.263 real
         // disagreement at a 0.05 target)
         "--rules",
         "stable-peak",
         "--dataset",
-        data.to_str().unwrap(),
+        case.data.to_str().unwrap(),
         "--out",
-        out,
+        &out,
     ];
-    let o = bowloc(&args);
+    let o = case.calibrate(&args);
     let stdout = String::from_utf8_lossy(&o.stdout);
     let stderr = String::from_utf8_lossy(&o.stderr);
     println!("{stdout}");
@@ -230,9 +243,9 @@ fn out_refuses_a_rule_that_does_not_transfer_unless_forced() {
         "{stderr}"
     );
     assert!(stdout.contains("missed the target"), "{stdout}");
-    assert!(!Path::new(out).exists());
+    assert!(!Path::new(&out).exists());
 
-    let o = bowloc(&[&args[..], &["--force"]].concat());
+    let o = case.calibrate(&[&args[..], &["--force"]].concat());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(bowloc::server::config::Config::load(Path::new(out)).is_ok());
+    assert!(bowloc::server::config::Config::load(Path::new(&out)).is_ok());
 }
