@@ -4,6 +4,7 @@
 use super::args::ExtractArgs;
 use bowloc::eval::machine::OpenCvInfo;
 use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig, Warmup};
+use bowloc::features::TileGrid;
 use clap::Args;
 use std::path::PathBuf;
 
@@ -53,6 +54,10 @@ pub struct EvalArgs {
     /// Skip the PNG/SVG figures.
     #[arg(long)]
     no_plots: bool,
+    /// The queries' tile grid for streaming extraction, COLSxROWS[+MARGIN]
+    /// (1x1: whole images). The full search also runs on whole queries.
+    #[arg(long, default_value = "2x2+24")]
+    tiles: TileGrid,
     #[command(flatten)]
     extract: ExtractArgs,
 }
@@ -84,6 +89,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         tolerance: a.tolerance,
         histogram: a.histogram,
         extract: a.extract.config(),
+        tiles: a.tiles,
         vocab: a.vocab,
         out: a
             .out

@@ -25,11 +25,12 @@ pub mod recommend;
 pub mod summary;
 pub mod sweep;
 pub mod table;
+pub mod tiles;
 pub mod timing;
 
 use crate::calibrate::{auto_warmup, median_features};
 use crate::dataset::Dataset;
-use crate::features::ExtractConfig;
+use crate::features::{ExtractConfig, TileGrid};
 use crate::index::MapIndex;
 use crate::pipeline::progress_bar;
 use crate::search::RuleSpec;
@@ -45,6 +46,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use summary::{QueryCost, SeedOutcomes, SettingSummary};
 use sweep::{BASELINE, Calibration, Outcome, RULE_GRIDS, RuleGrid};
+use tiles::Query;
 
 /// Quantization block, as the search uses by default.
 const BLOCK: usize = 32;
@@ -119,6 +121,10 @@ pub struct EvalConfig {
     /// recommended one.
     pub histogram: Option<String>,
     pub extract: ExtractConfig,
+    /// Streaming extraction's tile grid for the queries (the map images are
+    /// extracted whole). The full search is also run on the queries
+    /// extracted whole, to show what tiling changes.
+    pub tiles: TileGrid,
     /// Use this vocabulary instead of training one (its extraction settings win).
     pub vocab: Option<PathBuf>,
     pub out: PathBuf,
@@ -164,6 +170,8 @@ pub struct ConfigInfo {
     pub top_n: [usize; 3],
     pub tolerance: f64,
     pub extract: ExtractConfig,
+    /// The queries' tile grid, `COLSxROWS+MARGIN`.
+    pub tiles: String,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -234,6 +242,9 @@ pub struct Report {
     /// The same on plain recall@1 and recall@5.
     pub equal_recall_plain: Option<EqualRecall>,
     pub histogram: Option<HistogramInfo>,
+    /// The full search on the queries extracted whole (when they are tiled):
+    /// its time share is against the tiled full search.
+    pub whole_image: Option<SettingSummary>,
     pub per_query: PerQuery,
 }
 
@@ -320,49 +331,44 @@ fn validate(config: &EvalConfig) -> anyhow::Result<Vec<&'static RuleGrid>> {
     Ok(grids)
 }
 
-fn seconds_since(t: &mut Instant) -> f64 {
-    let s = t.elapsed().as_secs_f64();
-    *t = Instant::now();
-    s
-}
-
-/// One vocabulary's queries: words and costs.
-struct SeedWords {
-    words: Vec<Vec<u32>>,
-    costs: Vec<QueryCost>,
-}
-
-/// Quantize every query once with `vocab` (timed).
-fn quantize_queries(vocab: &Vocabulary, queries: &cache::DescriptorSet, what: &str) -> SeedWords {
-    let quantizer = vocab.exact_quantizer();
-    let bar = progress_bar(queries.len() as u64, what);
-    let quantized: Vec<timing::QueryWords> = (0..queries.len())
+/// Quantize every query once (timed), as the sweep replays it.
+fn quantize_queries(
+    set: &cache::DescriptorSet,
+    quantizer: &dyn crate::quantize::Quantizer,
+    what: &str,
+) -> (Vec<Query>, Vec<QueryCost>) {
+    let bar = progress_bar(set.len() as u64, what);
+    let quantized: Vec<(Query, QueryCost)> = (0..set.len())
         .into_par_iter()
         .map(|q| {
-            let words = match queries.image(q) {
-                Some(d) => timing::quantize_timed(&quantizer, d, BLOCK),
+            let w = match set.image(q) {
+                Some(d) => timing::quantize_timed(quantizer, d, BLOCK),
                 None => timing::QueryWords {
                     words: Vec::new(),
                     quantize_ms_per_feature: 0.0,
                 },
             };
             bar.inc(1);
-            words
+            let cost = QueryCost {
+                quantize_ms_per_feature: w.quantize_ms_per_feature,
+            };
+            (set.query(q, w.words), cost)
         })
         .collect();
     bar.finish_and_clear();
-    let costs = quantized
-        .iter()
-        .enumerate()
-        .map(|(q, w)| QueryCost {
-            extract_ms: queries.extract_ms(q),
-            quantize_ms_per_feature: w.quantize_ms_per_feature,
-        })
-        .collect();
-    SeedWords {
-        words: quantized.into_iter().map(|q| q.words).collect(),
-        costs,
-    }
+    quantized.into_iter().unzip()
+}
+
+fn seconds_since(t: &mut Instant) -> f64 {
+    let s = t.elapsed().as_secs_f64();
+    *t = Instant::now();
+    s
+}
+
+/// One vocabulary's queries and their quantization costs.
+struct SeedWords {
+    queries: Vec<Query>,
+    costs: Vec<QueryCost>,
 }
 
 /// Run the whole evaluation and write its outputs into `config.out`.
@@ -385,14 +391,31 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         &config.cache.join("map.bowdesc"),
         &dataset.map,
         &extract,
+        TileGrid::WHOLE,
         "extracting map",
     )?;
     let query_desc = cache::descriptors(
-        &config.cache.join("queries.bowdesc"),
+        &config
+            .cache
+            .join(format!("queries-{}.bowdesc", config.tiles)),
         &dataset.queries,
         &extract,
+        config.tiles,
         "extracting queries",
     )?;
+    let whole_desc = (config.tiles != TileGrid::WHOLE)
+        .then(|| {
+            cache::descriptors(
+                &config
+                    .cache
+                    .join(format!("queries-{}.bowdesc", TileGrid::WHOLE)),
+                &dataset.queries,
+                &extract,
+                TileGrid::WHOLE,
+                "extracting whole queries",
+            )
+        })
+        .transpose()?;
     stages.extract_s = seconds_since(&mut clock);
     let machine = MachineInfo::here(config.opencv.clone(), map_desc.hash(), query_desc.hash());
     let counts: Vec<usize> = (0..query_desc.len())
@@ -432,11 +455,22 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         .map(|v| cache::map_index(&config.cache, v, &map_desc, &dataset.name))
         .collect::<anyhow::Result<_>>()?;
     stages.map_s = seconds_since(&mut clock);
+    let quantize = |set: &cache::DescriptorSet, v: &Vocabulary, what: String| {
+        let (queries, costs) = quantize_queries(set, &v.exact_quantizer(), &what);
+        SeedWords { queries, costs }
+    };
     let per_seed: Vec<SeedWords> = vocabs
         .iter()
         .zip(&seeds)
-        .map(|(v, s)| quantize_queries(v, &query_desc, &format!("quantizing (seed {s})")))
+        .map(|(v, s)| quantize(&query_desc, v, format!("quantizing (seed {s})")))
         .collect();
+    let whole: Option<Vec<SeedWords>> = whole_desc.as_ref().map(|d| {
+        vocabs
+            .iter()
+            .zip(&seeds)
+            .map(|(v, s)| quantize(d, v, format!("quantizing whole queries (seed {s})")))
+            .collect()
+    });
     stages.quantize_s = seconds_since(&mut clock);
 
     // The grids are calibrated once, on the first vocabulary, so every seed
@@ -451,7 +485,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     );
     let (mut settings, calibrations) = sweep::plan(
         &maps[0],
-        &per_seed[0].words,
+        &per_seed[0].queries,
         &grids,
         &warmups,
         &config.targets,
@@ -484,9 +518,20 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     let outcomes: Vec<Vec<Vec<Vec<Outcome>>>> = maps
         .iter()
         .zip(&per_seed)
-        .map(|(map, q)| sweep::run_all(map, &q.words, &settings, config.runs, top_n, &bar))
+        .map(|(map, q)| sweep::run_all(map, &q.queries, &settings, config.runs, top_n, &bar))
         .collect();
     bar.finish_and_clear();
+    let tiles_total: Vec<usize> = per_seed[0]
+        .queries
+        .iter()
+        .map(|q| q.tiles.len().max(1))
+        .collect();
+    // the full search's request times, per seed: what time shares are of
+    let full_ms: Vec<Vec<Vec<f64>>> = outcomes
+        .iter()
+        .zip(&per_seed)
+        .map(|(o, q)| summary::request_ms(&o[0], &q.costs))
+        .collect();
     let summaries: Vec<SettingSummary> = settings
         .par_iter()
         .enumerate()
@@ -494,14 +539,47 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             let by_seed: Vec<SeedOutcomes<'_>> = outcomes
                 .iter()
                 .zip(&per_seed)
-                .map(|(o, q)| SeedOutcomes {
+                .zip(&full_ms)
+                .map(|((o, q), full)| SeedOutcomes {
                     runs: &o[i],
                     costs: &q.costs,
+                    full_ms: full,
                 })
                 .collect();
-            summary::summarize(s, &by_seed, &dataset.truth)
+            summary::summarize(s, &by_seed, &dataset.truth, &tiles_total)
         })
         .collect();
+    // The full search on the queries extracted whole: what tiling changes.
+    let whole_image = whole.map(|whole| {
+        let bar = progress_bar(
+            (counts.len() * seeds.len()) as u64,
+            "sweeping whole queries",
+        );
+        let runs: Vec<Vec<Vec<Outcome>>> = maps
+            .iter()
+            .zip(&whole)
+            .map(|(map, q)| {
+                let mut o =
+                    sweep::run_all(map, &q.queries, &settings[..1], config.runs, top_n, &bar);
+                o.swap_remove(0)
+            })
+            .collect();
+        bar.finish_and_clear();
+        let by_seed: Vec<SeedOutcomes<'_>> = runs
+            .iter()
+            .zip(&whole)
+            .zip(&full_ms)
+            .map(|((o, q), full)| SeedOutcomes {
+                runs: o,
+                costs: &q.costs,
+                full_ms: full,
+            })
+            .collect();
+        let ones = vec![1; counts.len()];
+        let mut s = summary::summarize(&settings[0], &by_seed, &dataset.truth, &ones);
+        s.label = format!("{} (whole image)", s.label);
+        s
+    });
     stages.sweep_s = seconds_since(&mut clock);
 
     let chance_at_1 = recommend::chance_recall(&dataset.truth, dataset.map.len(), 1);
@@ -571,6 +649,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             top_n: summary::TOP_N,
             tolerance: config.tolerance,
             extract,
+            tiles: config.tiles.to_string(),
         },
         machine,
         vocabularies: vocabs
@@ -590,6 +669,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         equal_recall,
         equal_recall_plain,
         histogram,
+        whole_image,
         per_query: PerQuery {
             queries: dataset.queries.iter().map(|q| q.name.clone()).collect(),
             truth: dataset

@@ -72,13 +72,60 @@ pub struct RunMetrics {
     pub fraction: f64,
 }
 
-/// What the evaluation needs to know about each query besides its answers.
+/// What the evaluation needs to know about each query besides its answers
+/// (its extraction cost comes with each outcome: it depends on the tiles
+/// extracted).
 #[derive(Debug, Clone, Copy)]
 pub struct QueryCost {
-    /// Decode + extract time, in milliseconds.
-    pub extract_ms: f64,
     /// Quantization time per feature, in milliseconds.
     pub quantize_ms_per_feature: f64,
+}
+
+/// A query's request time under one outcome: decoding and extracting the
+/// tiles extracted, quantizing and voting the features used, in milliseconds.
+pub fn stage_sample(o: &Outcome, c: &QueryCost) -> StageSample {
+    StageSample {
+        extract: o.extract_ms as f64,
+        quantize: c.quantize_ms_per_feature * o.used as f64,
+        vote: o.vote_ms as f64,
+    }
+}
+
+/// Request time of every outcome `runs[run][query]`, in milliseconds.
+pub fn request_ms(runs: &[Vec<Outcome>], costs: &[QueryCost]) -> Vec<Vec<f64>> {
+    runs.iter()
+        .map(|r| {
+            r.iter()
+                .zip(costs)
+                .map(|(o, c)| stage_sample(o, c).total())
+                .collect()
+        })
+        .collect()
+}
+
+/// A setting's request time as a fraction of the full search's, query by
+/// query in the same run: mean and median over queries × runs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct TimeShare {
+    pub mean: f64,
+    pub median: f64,
+}
+
+impl TimeShare {
+    /// `ms[run][query]` against the full search's `full[run][query]`.
+    pub fn of(ms: &[Vec<f64>], full: &[Vec<f64>]) -> Self {
+        let ratios: Vec<f64> = ms
+            .iter()
+            .zip(full)
+            .flat_map(|(a, b)| a.iter().zip(b))
+            .filter(|(_, b)| **b > 0.0)
+            .map(|(a, b)| a / b)
+            .collect();
+        Self {
+            mean: metrics::mean(&ratios),
+            median: timing::quantiles(&ratios).median,
+        }
+    }
 }
 
 /// Everything reported for one setting.
@@ -93,6 +140,11 @@ pub struct SettingSummary {
     pub fraction: Stat,
     /// Per-query stage times over all seeds, queries and runs, in milliseconds.
     pub time_ms: StageTimes,
+    /// Request time as a fraction of the full search's on the same query
+    /// (and vocabulary).
+    pub time_share: TimeShare,
+    /// Mean fraction of the image's tiles extracted.
+    pub tiles: f64,
     /// The metrics of every run: `runs[seed][run]`.
     pub runs: Vec<Vec<RunMetrics>>,
 }
@@ -137,6 +189,8 @@ impl SettingSummary {
             recall_at_5: stat(recall_at_1),
             fraction: stat(fraction),
             time_ms: StageTimes::default(),
+            time_share: TimeShare::default(),
+            tiles: 1.0,
             runs: vec![],
         }
     }
@@ -169,6 +223,9 @@ pub fn run_metrics(outcomes: &[Outcome], truth: &[HashSet<u32>]) -> RunMetrics {
 pub struct SeedOutcomes<'a> {
     pub runs: &'a [Vec<Outcome>],
     pub costs: &'a [QueryCost],
+    /// The full search's request time on this vocabulary, `[run][query]`
+    /// (see [`request_ms`]).
+    pub full_ms: &'a [Vec<f64>],
 }
 
 /// Summarise a setting from its outcomes on each vocabulary seed.
@@ -176,6 +233,7 @@ pub fn summarize(
     setting: &Setting,
     seeds: &[SeedOutcomes<'_>],
     truth: &[HashSet<u32>],
+    tiles_total: &[usize],
 ) -> SettingSummary {
     let per_run: Vec<Vec<RunMetrics>> = seeds
         .iter()
@@ -192,12 +250,22 @@ pub fn summarize(
     let samples: Vec<StageSample> = seeds
         .iter()
         .flat_map(|s| s.runs.iter().flat_map(|r| r.iter().zip(s.costs)))
-        .map(|(o, c)| StageSample {
-            extract: c.extract_ms,
-            quantize: c.quantize_ms_per_feature * o.used as f64,
-            vote: o.vote_ms as f64,
-        })
+        .map(|(o, c)| stage_sample(o, c))
         .collect();
+    let tile_shares: Vec<f64> = seeds
+        .iter()
+        .flat_map(|s| s.runs.iter().flat_map(|r| r.iter().zip(tiles_total)))
+        .map(|(o, &n)| o.tiles as f64 / n.max(1) as f64)
+        .collect();
+    // request times of every seed's runs, against that seed's full search
+    let (ms, full): (Vec<Vec<f64>>, Vec<Vec<f64>>) = seeds
+        .iter()
+        .flat_map(|s| {
+            request_ms(s.runs, s.costs)
+                .into_iter()
+                .zip(s.full_ms.iter().cloned())
+        })
+        .unzip();
     SettingSummary {
         setting: setting.clone(),
         label: setting.label(),
@@ -206,6 +274,8 @@ pub fn summarize(
         recall_at_5: over(&|m| m.recall_at_5),
         fraction: over(&|m| m.fraction),
         time_ms: timing::summarize(&samples),
+        time_share: TimeShare::of(&ms, &full),
+        tiles: metrics::mean(&tile_shares),
         runs: per_run,
     }
 }
@@ -230,6 +300,8 @@ mod tests {
             total: 100,
             stop: crate::search::StopKind::Rule,
             vote_ms: 1.0,
+            extract_ms: 10.0,
+            tiles: 1,
         }
     }
 
@@ -245,14 +317,16 @@ mod tests {
         ];
         let setting = Setting::new(RuleSpec::new("none", None).unwrap(), 0);
         let costs = [QueryCost {
-            extract_ms: 10.0,
             quantize_ms_per_feature: 0.1,
         }; 2];
+        // the full search took 21 ms on every query (10 + 100 × 0.1 + 1)
+        let full = vec![vec![21.0; 2]; 2];
         let one = [SeedOutcomes {
             runs: &runs,
             costs: &costs,
+            full_ms: &full,
         }];
-        let s = summarize(&setting, &one, &truth);
+        let s = summarize(&setting, &one, &truth, &[1, 1]);
         assert_eq!(s.runs[0][0].recall90, [1.0; 3]);
         assert_eq!(s.runs[0][1].recall90, [0.0; 3]);
         assert_eq!(s.recall90_at(5).mean, 0.5);
@@ -266,6 +340,9 @@ mod tests {
         // Quantize time is charged per feature used: 20..100 features.
         assert_eq!(s.time_ms.quantize.p95, 10.0);
         assert_eq!(s.time_ms.extract.median, 10.0);
+        // 50 features: 10 + 5 + 1 = 16 ms, 16/21 of the full search
+        assert!((s.time_share.mean - (16.0 + 14.0 + 21.0 + 13.0) / 4.0 / 21.0).abs() < 1e-12);
+        assert_eq!(s.tiles, 1.0);
         assert_eq!(fractions(&runs), [0.5, 0.3, 1.0, 0.2]);
 
         // A second vocabulary on which run 1 is right too: the seeds' means
@@ -277,9 +354,10 @@ mod tests {
             SeedOutcomes {
                 runs: &better,
                 costs: &costs,
+                full_ms: &full,
             },
         ];
-        let s = summarize(&setting, &two, &truth);
+        let s = summarize(&setting, &two, &truth, &[1, 1]);
         let r = s.recall90_at(5);
         assert_eq!(r.per_seed, [0.5, 1.0]);
         assert_eq!(r.mean, 0.75);
