@@ -1,7 +1,7 @@
 //! `bowloc eval`: reproduce the paper's evaluation on a dataset in the shared
 //! layout (tables, CSV, JSON and plots in `--out`).
 
-use super::args::ExtractArgs;
+use super::args::{ExtractArgs, VerifyArgs};
 use bowloc::eval::machine::OpenCvInfo;
 use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig, Warmup};
 use bowloc::features::TileGrid;
@@ -60,6 +60,10 @@ pub struct EvalArgs {
     tiles: TileGrid,
     #[command(flatten)]
     extract: ExtractArgs,
+    /// With --verify: rows with and without geometric verification for the
+    /// full search and the --set settings.
+    #[command(flatten)]
+    verify: VerifyArgs,
 }
 
 pub fn run(a: EvalArgs) -> anyhow::Result<()> {
@@ -78,7 +82,9 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
             seeds
         }),
     };
+    let verify = a.verify.params()?;
     let config = EvalConfig {
+        verify: verify.enabled.then_some(verify),
         words: a.words,
         seeds,
         runs: a.runs,
@@ -134,6 +140,23 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
     }
     if let Some(why) = &report.no_recommendation {
         println!("no recommendation: {why}");
+    }
+    if let Some(v) = &report.verification {
+        for r in &v.rows {
+            println!(
+                "{}: recall@1 {:.1} % → {:.1} % with verification, recall@5 {:.1} % → {:.1} %, recall top-1 @90%P {:.1} % → {:.1} %, recall top-5 @90%P {:.1} % → {:.1} %, verification {:.2} ms per query (median)",
+                r.label,
+                100.0 * r.without.recall_at_1.mean,
+                100.0 * r.with.recall_at_1.mean,
+                100.0 * r.without.recall_at_5.mean,
+                100.0 * r.with.recall_at_5.mean,
+                100.0 * r.without.recall90_top1.mean,
+                100.0 * r.with.recall90_top1.mean,
+                100.0 * r.without.recall90_top5.mean,
+                100.0 * r.with.recall90_top5.mean,
+                r.verify_ms.median,
+            );
+        }
     }
     println!("{}", config.out.join("results.md").display());
     Ok(())

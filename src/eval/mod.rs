@@ -13,7 +13,10 @@
 //! 4. [`summary`] (with the definitions in [`metrics`]): every figure as a
 //!    mean over vocabulary seeds with its spread over seeds and, apart, over
 //!    runs; [`recommend`] and [`equal_recall`] decide on the worst seed;
-//! 5. [`table`] and [`plots`]: the outputs, with every query's answers in
+//! 5. [`verify`] (when asked): the full search and the explicit settings
+//!    re-ranked by geometric verification, with and without side by side
+//!    (on the first vocabulary);
+//! 6. [`table`] and [`plots`]: the outputs, with every query's answers in
 //!    `results.json` for re-scoring.
 
 pub mod cache;
@@ -27,6 +30,7 @@ pub mod sweep;
 pub mod table;
 pub mod tiles;
 pub mod timing;
+pub mod verify;
 
 use crate::calibrate::{auto_warmup, median_features};
 use crate::dataset::Dataset;
@@ -135,6 +139,8 @@ pub struct EvalConfig {
     pub command: String,
     /// OpenCV as loaded (recorded in the outputs).
     pub opencv: OpenCvInfo,
+    /// Also verify the full search and the explicit settings geometrically.
+    pub verify: Option<crate::geometry::verify::VerifyParams>,
 }
 
 /// The dataset as evaluated.
@@ -190,6 +196,8 @@ pub struct Stages {
     pub quantize_s: f64,
     pub calibrate_s: f64,
     pub sweep_s: f64,
+    /// The verification pass (0 without).
+    pub verify_s: f64,
     pub total_s: f64,
 }
 
@@ -246,6 +254,8 @@ pub struct Report {
     /// its time share is against the tiled full search.
     pub whole_image: Option<SettingSummary>,
     pub per_query: PerQuery,
+    /// The verification pass, when asked for.
+    pub verification: Option<verify::VerificationReport>,
 }
 
 /// The grids of the rules asked for, the full search first.
@@ -455,6 +465,15 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         .map(|v| cache::map_index(&config.cache, v, &map_desc, &dataset.name))
         .collect::<anyhow::Result<_>>()?;
     stages.map_s = seconds_since(&mut clock);
+    // one OpenCV thread per query: the sweep already runs one query per core
+    crate::features::set_opencv_threads(1);
+    // Geometric verification as the service does it: for the `verified`
+    // stop always, for re-ranking in the `+verify` settings.
+    let verify_params = config.verify.clone().unwrap_or_default();
+    let geometry = std::sync::Arc::new(tiles::Geometry {
+        fit: Box::new(crate::features::fit::OpenCvFit::new(verify_params.fit())),
+        params: verify_params.clone(),
+    });
     let quantize = |set: &cache::DescriptorSet, v: &Vocabulary, what: String| {
         let (queries, costs) = quantize_queries(set, &v.exact_quantizer(), &what);
         SeedWords { queries, costs }
@@ -462,7 +481,13 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     let per_seed: Vec<SeedWords> = vocabs
         .iter()
         .zip(&seeds)
-        .map(|(v, s)| quantize(&query_desc, v, format!("quantizing (seed {s})")))
+        .map(|(v, s)| {
+            let mut words = quantize(&query_desc, v, format!("quantizing (seed {s})"));
+            for q in &mut words.queries {
+                q.geometry = Some(geometry.clone());
+            }
+            words
+        })
         .collect();
     let whole: Option<Vec<SeedWords>> = whole_desc.as_ref().map(|d| {
         vocabs
@@ -503,6 +528,19 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
                 settings.len() - 1
             });
         explicit.push(index);
+    }
+    // With verification: the full search and each explicit setting again,
+    // re-ranked by geometric verification.
+    let mut verified_pairs = Vec::new();
+    if config.verify.is_some() {
+        let mut indices = vec![0];
+        indices.extend(explicit.iter().copied().filter(|&i| i != 0));
+        for i in indices {
+            let mut s = settings[i].clone();
+            s.verify = true;
+            settings.push(s);
+            verified_pairs.push((i, settings.len() - 1));
+        }
     }
     stages.calibrate_s = seconds_since(&mut clock);
     tracing::info!(
@@ -623,6 +661,26 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         }
     });
 
+    let verification = config
+        .verify
+        .as_ref()
+        .map(|params| verify::VerificationReport {
+            params: params.clone(),
+            rows: verified_pairs
+                .iter()
+                .map(|&(without, with)| {
+                    verify::row(
+                        &summaries[without].label,
+                        without,
+                        &outcomes[0][without],
+                        &outcomes[0][with],
+                        &dataset.truth,
+                    )
+                })
+                .collect(),
+        });
+    stages.verify_s = seconds_since(&mut clock);
+
     let mean_features = metrics::mean(&counts.iter().map(|&n| n as f64).collect::<Vec<_>>());
     stages.total_s = started.elapsed().as_secs_f64();
     let report = Report {
@@ -670,6 +728,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         equal_recall_plain,
         histogram,
         whole_image,
+        verification,
         per_query: PerQuery {
             queries: dataset.queries.iter().map(|q| q.name.clone()).collect(),
             truth: dataset

@@ -88,6 +88,7 @@ pub fn stage_sample(o: &Outcome, c: &QueryCost) -> StageSample {
         extract: o.extract_ms as f64,
         quantize: c.quantize_ms_per_feature * o.used as f64,
         vote: o.vote_ms as f64,
+        verify: o.verify_ms as f64,
     }
 }
 
@@ -301,7 +302,9 @@ mod tests {
             stop: crate::search::StopKind::Rule,
             vote_ms: 1.0,
             extract_ms: 10.0,
+            verify_ms: 0.0,
             tiles: 1,
+            verified: false,
         }
     }
 

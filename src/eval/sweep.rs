@@ -6,7 +6,7 @@
 use super::tiles::Query;
 use crate::calibrate::median_features;
 use crate::index::MapIndex;
-use crate::search::{Ranked, RuleSpec, SearchOptions, SearchOutcome, StopKind, search_words};
+use crate::search::{Ranked, RuleSpec, SearchOptions, StopKind, search_words};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::{Serialize, Serializer};
@@ -83,6 +83,10 @@ pub const RULE_GRIDS: &[RuleGrid] = &[
         rule: "confident",
         grid: Grid::Values(&[0.1, 0.05, 0.01]),
     },
+    RuleGrid {
+        rule: "verified",
+        grid: Grid::Values(&[8.0, 12.0, 16.0, 24.0]),
+    },
 ];
 
 /// Range searched when calibrating a rule's parameter: the calibrated grid's
@@ -110,6 +114,8 @@ pub struct Setting {
     pub min_features: usize,
     /// The fraction of features its parameter was calibrated for, if any.
     pub target: Option<f64>,
+    /// Candidates re-ranked by geometric verification.
+    pub verify: bool,
     /// Why this grid point does not measure the rule (calibration hit a
     /// search bound, or the warm-up leaves the rule unconsulted): such points
     /// are shown, marked, but kept out of the equal-recall tables and the
@@ -119,9 +125,11 @@ pub struct Setting {
 }
 
 impl Setting {
-    /// A setting at warm-up `min_features`, not calibrated.
+    /// A setting at warm-up `min_features`, not calibrated; verified when
+    /// the rule is a geometric one.
     pub fn new(rule: RuleSpec, min_features: usize) -> Self {
         Self {
+            verify: rule.info().geometric,
             rule,
             min_features,
             target: None,
@@ -142,6 +150,9 @@ impl Setting {
         }
         if self.min_features > 0 {
             s += &format!(" w={}", self.min_features);
+        }
+        if self.verify {
+            s += " +verify";
         }
         s
     }
@@ -241,8 +252,13 @@ pub struct Outcome {
     /// Decoding and extracting the tiles extracted, in milliseconds.
     #[serde(skip)]
     pub extract_ms: f32,
+    /// Verifying the candidates after the search, in milliseconds.
+    #[serde(skip)]
+    pub verify_ms: f32,
     /// Tiles extracted (1 for a query extracted whole).
     pub tiles: u16,
+    /// The best candidate is geometrically verified.
+    pub verified: bool,
 }
 
 fn id_score_pairs<S: Serializer>(list: &[Ranked], s: S) -> Result<S::Ok, S::Error> {
@@ -269,7 +285,17 @@ pub fn search_one(
     top_n: usize,
 ) -> Outcome {
     let o = search_words(map, words, &setting.options(seed, top_n));
-    outcome(o, words.len(), 0.0, 1)
+    Outcome {
+        candidates: o.candidates,
+        used: o.features_used as u32,
+        total: words.len() as u32,
+        stop: o.stop.kind,
+        vote_ms: o.timings.vote.as_secs_f32() * 1e3,
+        extract_ms: 0.0,
+        verify_ms: 0.0,
+        tiles: 1,
+        verified: false,
+    }
 }
 
 /// One search of a cached query, its tiles streamed as the service would.
@@ -280,20 +306,17 @@ pub fn search_query(
     seed: u64,
     top_n: usize,
 ) -> Outcome {
-    let (o, tiles, extract_ms) = query.search(map, &setting.options(seed, top_n));
-    outcome(o, query.words.len(), extract_ms, tiles)
-}
-
-/// `total`: the query's features, extracted or not.
-fn outcome(o: SearchOutcome, total: usize, extract_ms: f64, tiles: usize) -> Outcome {
+    let r = query.search(map, &setting.options(seed, top_n), setting.verify);
     Outcome {
-        candidates: o.candidates,
-        used: o.features_used as u32,
-        total: total as u32,
-        stop: o.stop.kind,
-        vote_ms: o.timings.vote.as_secs_f32() * 1e3,
-        extract_ms: extract_ms as f32,
-        tiles: tiles as u16,
+        candidates: r.outcome.candidates,
+        used: r.outcome.features_used as u32,
+        total: query.words.len() as u32,
+        stop: r.outcome.stop.kind,
+        vote_ms: r.outcome.timings.vote.as_secs_f32() * 1e3,
+        extract_ms: r.extract_ms as f32,
+        verify_ms: r.verify_ms as f32,
+        tiles: r.tiles as u16,
+        verified: r.verified,
     }
 }
 

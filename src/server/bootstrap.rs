@@ -37,6 +37,7 @@ pub fn load(config: &Config) -> anyhow::Result<Localizer> {
         max_pixels: config.limits.pixels,
     };
     localizer.quantizer = config.quantizer().map_err(anyhow::Error::msg)?;
+    localizer.set_verify(config.verify.clone());
     if let QuantizerKind::Tree { .. } = localizer.quantizer {
         // build the tree now, not in the first request
         let groups = localizer.vocab.tree_quantizer().groups();
