@@ -46,7 +46,7 @@ enum Command {
     Serve(serve::ServeArgs),
     /// Print the HTTP API's OpenAPI document (as in docs/openapi.json).
     Openapi,
-    /// Exit 0 when a running service's /healthz answers 200.
+    /// Exit 0 when a running service answers 200 on /readyz (or --path).
     Healthcheck(healthcheck::HealthcheckArgs),
 }
 

@@ -34,7 +34,7 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
     ),
     components(schemas(
         Localization, Candidate, FeatureUse, RuleReport, StopInfo, ImageSize, Timings,
-        MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload,
+        MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload, Binary,
     )),
     tags(
         (name = "localize", description = "Localize a query image against the loaded map."),
@@ -42,6 +42,13 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
     )
 )]
 struct ApiDoc;
+
+/// Raw bytes in a request or answer body (an image, a protobuf message):
+/// `type: string, format: binary`.
+#[derive(utoipa::ToSchema)]
+#[schema(value_type = String, format = Binary)]
+#[allow(dead_code)]
+pub struct Binary(Vec<u8>);
 
 /// The document.
 pub fn document() -> utoipa::openapi::OpenApi {
