@@ -111,6 +111,28 @@ mod tests {
     use super::*;
 
     #[test]
+    fn binary_bodies_are_binary_strings_and_ranks_start_at_1() {
+        let v: serde_json::Value = serde_json::from_str(json()).unwrap();
+        let binary = &v["components"]["schemas"]["Binary"];
+        assert_eq!(binary["type"], "string");
+        assert_eq!(binary["format"], "binary");
+        let op = &v["paths"]["/localize"]["post"];
+        let bodies = op["requestBody"]["content"].as_object().unwrap();
+        for (media, content) in bodies {
+            if media != "multipart/form-data" {
+                assert_eq!(
+                    content["schema"]["$ref"], "#/components/schemas/Binary",
+                    "{media}"
+                );
+            }
+        }
+        let protobuf = &op["responses"]["200"]["content"]["application/x-protobuf"];
+        assert_eq!(protobuf["schema"]["$ref"], "#/components/schemas/Binary");
+        let rank = &v["components"]["schemas"]["Candidate"]["properties"]["rank"];
+        assert_eq!(rank["minimum"], 1);
+    }
+
+    #[test]
     fn rule_parameter_lists_every_rule() {
         let v: serde_json::Value = serde_json::from_str(json()).unwrap();
         let params = v["paths"]["/localize"]["post"]["parameters"]
