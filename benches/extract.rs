@@ -38,7 +38,7 @@ fn extract_ms(image: &[u8], c: &ExtractConfig) -> (f64, usize) {
         c,
     )
     .unwrap();
-    (start.elapsed().as_secs_f64() * 1e3, d.nrows())
+    (start.elapsed().as_secs_f64() * 1e3, d.len())
 }
 
 fn summary(images: &[Vec<u8>]) {

@@ -11,6 +11,7 @@
 //! - [`quantize`] — descriptor → nearest visual word, batched through a
 //!   matrix multiply.
 //! - [`vocabulary`] — the visual words (k-means centroids) and their training.
+//! - [`geometry`] — keypoints as plain numbers (position, size, angle).
 //! - [`index`] — the map: a tf-idf inverted index over the map's images.
 //! - [`store`] — the memory-mapped, checksummed file format both are kept in.
 //! - [`dataset`] — the shared dataset layout (image lists, ground truth).
@@ -32,6 +33,7 @@ pub mod calibrate;
 pub mod dataset;
 pub mod eval;
 pub mod features;
+pub mod geometry;
 pub mod index;
 pub mod pipeline;
 pub mod quantize;

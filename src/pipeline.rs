@@ -3,11 +3,13 @@
 //! (decode → extract → search → report).
 
 use crate::dataset::ImageRef;
-use crate::features::{self, DecodeLimits, Descriptors, ExtractConfig, FeatureError};
+use crate::features::{
+    self, DecodeLimits, Descriptors, ExtractConfig, FeatureError, TileGrid, Tiles,
+};
 use crate::index::{ImageWords, MapBuilder, MapIndex, Places};
 use crate::quantize::{Quantizer, QuantizerKind};
-use crate::report::{EdgeTimings, ImageSize, Localization};
-use crate::search::{self, SearchOptions};
+use crate::report::{EdgeTimings, Extraction, ImageSize, Localization};
+use crate::search::{self, Search, SearchOptions};
 use crate::vocabulary::kmeans::{KmeansConfig, kmeans};
 use crate::vocabulary::{Vocabulary, VocabularyMeta};
 use anyhow::{Context, bail};
@@ -72,7 +74,7 @@ pub fn extract_all_timed(
             let started = Instant::now();
             let r = features::decode_file(&image.path, limits).and_then(|decoded| {
                 let read = started.elapsed();
-                let descriptors = features::extract(&decoded, config)?;
+                let descriptors = features::extract(&decoded, config)?.descriptors;
                 Ok(Extracted {
                     descriptors,
                     decode: read,
@@ -277,7 +279,14 @@ pub struct Localizer {
     /// How queries are extracted: the vocabulary's settings, which a front end
     /// may tighten (e.g. cap `sift.max_features`).
     pub extract: ExtractConfig,
+    /// How queries are cut into tiles for streaming extraction
+    /// ([`TileGrid::WHOLE`]: the whole image at once).
+    pub tiles: TileGrid,
 }
+
+/// Salt of the tile order's seed, so the tile order and the order of the
+/// features inside the first tile are not drawn from the same stream.
+const TILE_ORDER_SALT: u64 = 0x7469_6c65_6f72_6465;
 
 impl Localizer {
     /// Open both files and check that the map was built with the vocabulary.
@@ -290,41 +299,78 @@ impl Localizer {
             map,
             limits: DecodeLimits::default(),
             quantizer: QuantizerKind::Exact,
+            tiles: TileGrid::WHOLE,
         })
     }
 
-    /// Answer one query image given as encoded bytes.
+    /// Answer one query image given as encoded bytes: decode, then extract
+    /// tile after tile (in a random order drawn from the seed) and feed each
+    /// tile's features to the search, until the search stops or the tiles
+    /// run out.
     pub fn localize(
         &self,
         bytes: &[u8],
         options: &SearchOptions,
     ) -> Result<Localization, FeatureError> {
+        self.localize_tiled(bytes, options, self.tiles)
+    }
+
+    /// [`Localizer::localize`] with another tile grid than the configured one.
+    pub fn localize_tiled(
+        &self,
+        bytes: &[u8],
+        options: &SearchOptions,
+        grid: TileGrid,
+    ) -> Result<Localization, FeatureError> {
         let started = Instant::now();
         let image = features::decode(bytes, self.limits)?;
         let decoded = Instant::now();
-        let descriptors = features::extract(&image, &self.extract)?;
-        let edge = EdgeTimings {
-            decode: decoded - started,
-            extract: decoded.elapsed(),
-        };
         let size = ImageSize {
             width: image.width(),
             height: image.height(),
         };
-        Ok(self.search(descriptors.view(), options, size, edge))
-    }
-
-    /// Run the search over extracted descriptors and build the report.
-    pub fn search(
-        &self,
-        descriptors: ArrayView2<'_, f32>,
-        options: &SearchOptions,
-        size: ImageSize,
-        edge: EdgeTimings,
-    ) -> Localization {
+        let mut tiles = Tiles::new(&image, &self.extract, grid, |n| {
+            search::permute::permutation(n, options.seed ^ TILE_ORDER_SALT)
+        })?;
+        let mut extract = decoded.elapsed();
         let quantizer = self.vocab.quantizer(self.quantizer);
-        let outcome = search::search(&*quantizer, &self.map, descriptors, options);
-        Localization::new(&self.map, &options.rule, options.seed, size, outcome, edge)
+        let mut search = Search::new(&self.map, options);
+        loop {
+            let t = Instant::now();
+            let Some(tile) = tiles.next_tile() else { break };
+            let tile = tile?;
+            extract += t.elapsed();
+            let fed = search.fed() + tile.len();
+            if tiles.extracted() == tiles.total() {
+                search.set_total(fed);
+            } else {
+                search.set_expected_total(fed as f64 / tiles.area_extracted().max(1e-9));
+            }
+            if search::feed_descriptors(&mut search, &*quantizer, tile.descriptors.view()) {
+                break;
+            }
+        }
+        let extraction = Extraction {
+            tiles_extracted: tiles.extracted(),
+            tiles_total: tiles.total(),
+            grid,
+            expected_features: search.tally().total_or_estimate(),
+            complete: tiles.extracted() == tiles.total(),
+        };
+        let edge = EdgeTimings {
+            decode: decoded - started,
+            extract,
+        };
+        let outcome = search.finish();
+        Ok(Localization::new(
+            &self.map,
+            &options.rule,
+            options.seed,
+            size,
+            outcome,
+            edge,
+            extraction,
+        ))
     }
 
     /// Read a file and answer it as a query.

@@ -4,6 +4,7 @@
 //! describe themselves as OpenAPI schemas (utoipa) for the service's API
 //! document.
 
+use crate::features::TileGrid;
 use crate::index::{ImageInfo, MapIndex};
 use crate::search::{RuleSpec, SearchOutcome, StopInfo};
 use serde::Serialize;
@@ -30,6 +31,8 @@ pub struct Localization {
     /// features.
     pub candidates: Vec<Candidate>,
     pub features: FeatureUse,
+    /// How much of the image was extracted (streaming extraction).
+    pub tiles: TileUse,
     pub rule: RuleReport,
     pub stop: StopInfo,
     /// Seed of the feature permutation (repeat it to reproduce the answer).
@@ -61,15 +64,49 @@ pub struct Candidate {
     pub pose: Option<HashMap<String, f64>>,
 }
 
-/// How many of the query's features the search used.
+/// How many of the query's features were extracted and used.
 #[derive(Debug, Clone, Copy, Serialize, ToSchema)]
 pub struct FeatureUse {
-    /// Features extracted from the query.
+    /// The query's features N: exact when every tile was extracted
+    /// (`tiles.extracted == tiles.total`), else estimated from the tiles
+    /// extracted (their features over their share of the image), rounded.
     pub total: usize,
+    /// Features extracted (from the tiles extracted).
+    pub extracted: usize,
     /// Features quantized and voted before the search stopped.
     pub used: usize,
     /// used / total (1 when the image has no features).
     pub fraction: f64,
+}
+
+/// The tiles of streaming extraction: the image is cut into a grid, tiles
+/// are extracted in a random order, and extraction ends when the search stops.
+#[derive(Debug, Clone, Copy, Serialize, ToSchema)]
+pub struct TileUse {
+    /// Tiles extracted.
+    pub extracted: usize,
+    /// Tiles of the image (1: the whole image at once).
+    pub total: usize,
+    /// The grid asked for, `COLSxROWS+MARGIN` (a small image gets fewer tiles).
+    #[schema(value_type = String, example = "2x2+24")]
+    #[serde(serialize_with = "crate::report::display")]
+    pub grid: TileGrid,
+}
+
+fn display<T: std::fmt::Display, S: serde::Serializer>(v: &T, s: S) -> Result<S::Ok, S::Error> {
+    s.collect_str(v)
+}
+
+/// What the extraction edge tells the report.
+#[derive(Debug, Clone, Copy)]
+pub struct Extraction {
+    pub tiles_extracted: usize,
+    pub tiles_total: usize,
+    pub grid: TileGrid,
+    /// N, or its estimate while tiles were left.
+    pub expected_features: f64,
+    /// Every tile was extracted.
+    pub complete: bool,
 }
 
 /// The stopping rule the search ran with.
@@ -155,6 +192,27 @@ impl Candidate {
     }
 }
 
+impl FeatureUse {
+    fn new(outcome: &SearchOutcome, extraction: &Extraction) -> Self {
+        let total = if extraction.complete {
+            outcome.features_total
+        } else {
+            (extraction.expected_features.round() as usize).max(outcome.features_total)
+        };
+        let used = outcome.features_used;
+        Self {
+            total,
+            extracted: outcome.features_total,
+            used,
+            fraction: if total == 0 {
+                1.0
+            } else {
+                used as f64 / total as f64
+            },
+        }
+    }
+}
+
 /// Everything measured outside the search itself.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct EdgeTimings {
@@ -170,6 +228,7 @@ impl Localization {
         image: ImageSize,
         outcome: SearchOutcome,
         edge: EdgeTimings,
+        extraction: Extraction,
     ) -> Self {
         let candidates = outcome
             .candidates
@@ -180,10 +239,11 @@ impl Localization {
         let t = outcome.timings;
         Self {
             candidates,
-            features: FeatureUse {
-                total: outcome.features_total,
-                used: outcome.features_used,
-                fraction: outcome.fraction_used(),
+            features: FeatureUse::new(&outcome, &extraction),
+            tiles: TileUse {
+                extracted: extraction.tiles_extracted,
+                total: extraction.tiles_total,
+                grid: extraction.grid,
             },
             rule: rule.into(),
             stop: outcome.stop,

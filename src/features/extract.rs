@@ -1,67 +1,181 @@
-//! Grayscale image → SIFT (or RootSIFT) descriptors as an `n × 128` matrix.
+//! Grayscale image → SIFT (or RootSIFT) features: keypoints and an `n × 128`
+//! descriptor matrix. [`extract`] takes the whole image at once; the tiled,
+//! streaming form in [`super::tiles`] uses the same [`Frame`] and detector.
 
 use super::{DecodeLimits, ExtractConfig, FeatureError, GrayImage, decode_file};
+use crate::geometry::Keypoint;
 use ndarray::Array2;
-use opencv::core::{KeyPoint, Mat, Size, Vector, no_array};
+use opencv::core::{KeyPoint, Mat, Ptr, Rect, Size, Vector, no_array};
+use opencv::features2d::SIFT;
 use opencv::prelude::*;
 
 /// One row per keypoint, 128 columns.
 pub type Descriptors = Array2<f32>;
 
-/// Extract descriptors from a decoded image.
-pub fn extract(image: &GrayImage, config: &ExtractConfig) -> Result<Descriptors, FeatureError> {
-    let scaled;
-    let mat = match downscale_size(image, config.max_side) {
-        Some(size) => {
-            let mut out = Mat::default();
-            opencv::imgproc::resize(
-                &image.0,
-                &mut out,
-                size,
-                0.0,
-                0.0,
-                opencv::imgproc::INTER_AREA,
-            )?;
-            scaled = out;
-            &scaled
-        }
-        None => &image.0,
-    };
-    let p = &config.sift;
-    let mut sift = opencv::features2d::SIFT::create(
-        p.max_features as i32,
-        p.octave_layers as i32,
-        p.contrast_threshold,
-        p.edge_threshold,
-        p.sigma,
-    )?;
-    let mut keypoints = Vector::<KeyPoint>::new();
-    let mut raw = Mat::default();
-    sift.detect_and_compute(mat, &no_array(), &mut keypoints, &mut raw, false)?;
-    let mut rows = raw.rows().max(0) as usize;
-    if p.max_features > 0 {
-        // OpenCV keeps ties with the weakest kept response: cap exactly.
-        rows = rows.min(p.max_features as usize);
-    }
-    if rows == 0 {
-        return Ok(Array2::zeros((0, 128)));
-    }
-    let cols = raw.cols() as usize;
-    let data: &[f32] = raw.data_typed()?;
-    let mut out = Array2::from_shape_vec((rows, cols), data[..rows * cols].to_vec())
-        .map_err(|e| FeatureError::OpenCv(e.to_string()))?;
-    if config.rootsift {
-        rootsift(&mut out);
-    }
-    Ok(out)
+/// An image's features: keypoint i is described by descriptor row i.
+#[derive(Debug, Clone)]
+pub struct Features {
+    pub keypoints: Vec<Keypoint>,
+    pub descriptors: Descriptors,
 }
 
-/// Decode a file and extract its descriptors.
+impl Features {
+    pub fn empty() -> Self {
+        Self {
+            keypoints: Vec::new(),
+            descriptors: Array2::zeros((0, 128)),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.keypoints.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.keypoints.is_empty()
+    }
+}
+
+/// The image as SIFT sees it: downscaled so its longer side is at most
+/// `max_side`, with a SIFT detector built from the configuration.
+pub struct Frame {
+    mat: Mat,
+    sift: Ptr<SIFT>,
+    rootsift: bool,
+}
+
+impl Frame {
+    /// Downscale `image` and prepare the detector. `max_features` overrides
+    /// the configured cap (a tile keeps its share of the image's cap).
+    pub fn new(image: &GrayImage, config: &ExtractConfig) -> Result<Self, FeatureError> {
+        let mat = match downscale_size(image, config.max_side) {
+            Some(size) => {
+                let mut out = Mat::default();
+                opencv::imgproc::resize(
+                    &image.0,
+                    &mut out,
+                    size,
+                    0.0,
+                    0.0,
+                    opencv::imgproc::INTER_AREA,
+                )?;
+                out
+            }
+            None => image.0.clone(),
+        };
+        let p = &config.sift;
+        let sift = SIFT::create(
+            0,
+            p.octave_layers as i32,
+            p.contrast_threshold,
+            p.edge_threshold,
+            p.sigma,
+        )?;
+        Ok(Self {
+            mat,
+            sift,
+            rootsift: config.rootsift,
+        })
+    }
+
+    /// Width and height of the extraction frame.
+    pub fn size(&self) -> (u32, u32) {
+        (self.mat.cols().max(0) as u32, self.mat.rows().max(0) as u32)
+    }
+
+    /// Detect and describe inside `region` (x, y, width, height, clipped to
+    /// the frame), keeping only keypoints whose centre lies in `core` (frame
+    /// coordinates, half-open). Keypoints come back in frame coordinates,
+    /// strongest first, at most `cap` of them (0 = all).
+    pub fn detect(
+        &mut self,
+        region: (u32, u32, u32, u32),
+        core: (u32, u32, u32, u32),
+        cap: usize,
+    ) -> Result<Features, FeatureError> {
+        let (fw, fh) = self.size();
+        let x0 = region.0.min(fw);
+        let y0 = region.1.min(fh);
+        let w = region.2.min(fw - x0);
+        let h = region.3.min(fh - y0);
+        if w < 2 || h < 2 {
+            return Ok(Features::empty());
+        }
+        let whole = (x0, y0, w, h) == (0, 0, fw, fh);
+        let roi;
+        let input: &Mat = if whole {
+            &self.mat
+        } else {
+            roi = Mat::roi(
+                &self.mat,
+                Rect::new(x0 as i32, y0 as i32, w as i32, h as i32),
+            )?
+            .try_clone()?;
+            &roi
+        };
+        let mut keypoints = Vector::<KeyPoint>::new();
+        let mut raw = Mat::default();
+        self.sift
+            .detect_and_compute(input, &no_array(), &mut keypoints, &mut raw, false)?;
+        let rows = raw.rows().max(0) as usize;
+        if rows == 0 {
+            return Ok(Features::empty());
+        }
+        let cols = raw.cols() as usize;
+        let data: &[f32] = raw.data_typed()?;
+        let (cx0, cy0) = (core.0 as f32, core.1 as f32);
+        let (cx1, cy1) = (cx0 + core.2 as f32, cy0 + core.3 as f32);
+        let mut kept: Vec<(Keypoint, usize)> = keypoints
+            .iter()
+            .take(rows)
+            .enumerate()
+            .map(|(i, k)| {
+                let p = k.pt();
+                let kp = Keypoint {
+                    x: p.x + x0 as f32,
+                    y: p.y + y0 as f32,
+                    size: k.size(),
+                    angle: k.angle(),
+                    response: k.response(),
+                };
+                (kp, i)
+            })
+            .filter(|(k, _)| k.x >= cx0 && k.x < cx1 && k.y >= cy0 && k.y < cy1)
+            .collect();
+        // Strongest first (stable, so equal responses keep OpenCV's order),
+        // then cap exactly: OpenCV's own cap keeps ties with the weakest.
+        kept.sort_by(|a, b| b.0.response.total_cmp(&a.0.response));
+        if cap > 0 {
+            kept.truncate(cap);
+        }
+        let mut descriptors = Array2::<f32>::zeros((kept.len(), cols));
+        for (mut row, (_, i)) in descriptors.rows_mut().into_iter().zip(&kept) {
+            row.assign(&ndarray::ArrayView1::from(&data[i * cols..(i + 1) * cols]));
+        }
+        if self.rootsift {
+            rootsift(&mut descriptors);
+        }
+        Ok(Features {
+            keypoints: kept.into_iter().map(|(k, _)| k).collect(),
+            descriptors,
+        })
+    }
+}
+
+/// Extract the features of a whole decoded image.
+pub fn extract(image: &GrayImage, config: &ExtractConfig) -> Result<Features, FeatureError> {
+    let mut frame = Frame::new(image, config)?;
+    let (w, h) = frame.size();
+    let all = (0, 0, w, h);
+    frame.detect(all, all, config.sift.max_features as usize)
+}
+
+/// Decode a file and extract its features.
 pub fn extract_file(
     path: &std::path::Path,
     config: &ExtractConfig,
     limits: DecodeLimits,
-) -> Result<Descriptors, FeatureError> {
+) -> Result<Features, FeatureError> {
     extract(&decode_file(path, limits)?, config)
 }
 

@@ -1,14 +1,16 @@
 //! The image edge of the pipeline (decode → extract): bytes in, SIFT
-//! descriptors out as an `ndarray` matrix. This is the only module that touches
+//! keypoints and descriptors out (an `ndarray` matrix). This is the only module that touches
 //! OpenCV; everything downstream works on plain arrays.
 
 mod config;
 mod decode;
 mod extract;
+mod tiles;
 
 pub use config::{ExtractConfig, SiftParams};
 pub use decode::{DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe};
-pub use extract::{Descriptors, extract, extract_file};
+pub use extract::{Descriptors, Features, Frame, extract, extract_file};
+pub use tiles::{TileGrid, Tiles};
 
 /// Why an image yielded no descriptors.
 #[derive(Debug, thiserror::Error)]

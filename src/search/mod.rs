@@ -1,15 +1,20 @@
-//! The early-stopping search, the heart of bowloc. Given a query's N
-//! descriptors it runs permute → quantize → vote → stop → rank:
+//! The early-stopping search, the heart of bowloc. Features arrive in
+//! batches (one batch per extracted tile, or the whole image as one batch)
+//! and each batch runs permute → quantize → vote → stop; the answer is ranked
+//! at the end:
 //!
-//! - [`permute`]: a seeded random order of the features;
-//! - quantize: blocks of `block` features at a time through a
-//!   [`Quantizer`](crate::quantize::Quantizer);
-//! - [`vote`]: one feature at a time, in permuted order, into the histogram;
+//! - [`permute`]: a seeded random order of each batch's features;
+//! - quantize: blocks of `block` features at a time through a caller's
+//!   quantizer (a [`Quantizer`](crate::quantize::Quantizer), or known words);
+//! - [`vote`]: one feature at a time into the histogram;
 //! - [`stop`]: the rule is checked after every vote, so a stop in mid-block
-//!   wastes at most one block of quantization;
+//!   wastes at most one block of quantization; once it fires, the caller
+//!   extracts no more batches;
 //! - [`rank`]: top-n images with scores comparable across stop points.
 //!
-//! Pure Rust over plain arrays: no OpenCV, no HTTP.
+//! [`Search`] is the streaming driver; [`search`] and [`search_words`] run it
+//! on one batch whose size is known up front. Pure Rust over plain arrays: no
+//! OpenCV, no HTTP.
 
 pub mod permute;
 pub mod rank;
@@ -90,19 +95,153 @@ pub struct SearchTimings {
 #[derive(Debug, Clone)]
 pub struct SearchOutcome {
     pub candidates: Vec<Ranked>,
+    /// Features given to the search (all of the query's, unless extraction
+    /// stopped early).
     pub features_total: usize,
+    /// Features quantized and voted.
     pub features_used: usize,
     pub stop: StopInfo,
     pub timings: SearchTimings,
 }
 
 impl SearchOutcome {
-    /// Fraction of the features that were quantized and voted (1 for none).
+    /// Fraction of the features given that were quantized and voted (1 for none).
     pub fn fraction_used(&self) -> f64 {
         if self.features_total == 0 {
             1.0
         } else {
             self.features_used as f64 / self.features_total as f64
+        }
+    }
+}
+
+/// Seed of the order inside batch `k`: batch 0 uses the search's seed itself,
+/// so a one-batch search orders its features by `permutation(n, seed)`.
+fn batch_seed(seed: u64, k: u64) -> u64 {
+    seed.wrapping_add(k.wrapping_mul(0x9E37_79B9_7F4A_7C15))
+}
+
+/// A search in progress: feed it batches of features until it stops or the
+/// features run out, then [`finish`](Search::finish) it.
+pub struct Search<'m> {
+    options: SearchOptions,
+    voter: Voter<'m>,
+    rule: Box<dyn StopRule>,
+    words: Vec<u32>,
+    timings: SearchTimings,
+    stop: Option<(StopKind, String)>,
+    batches: u64,
+    fed: usize,
+    /// (feature number over all batches, word) of every feature voted, in
+    /// voting order.
+    voted: Vec<(u32, u32)>,
+}
+
+impl<'m> Search<'m> {
+    pub fn new(map: &'m MapIndex, options: &SearchOptions) -> Self {
+        let rule = options.rule.build(&stop::RuleContext {
+            top_n: options.top_n,
+        });
+        let voter = Voter::with_needs(&map.view(), rule.needs());
+        Self {
+            options: options.clone(),
+            voter,
+            rule,
+            words: vec![0; options.block.max(1)],
+            timings: SearchTimings::default(),
+            stop: None,
+            batches: 0,
+            fed: 0,
+            voted: Vec::new(),
+        }
+    }
+
+    /// Whether the search has stopped (rule or deadline): feed no more.
+    pub fn stopped(&self) -> bool {
+        self.stop.is_some()
+    }
+
+    /// The query has exactly `n` features in all (every batch is known).
+    pub fn set_total(&mut self, n: usize) {
+        self.voter.set_total(n);
+    }
+
+    /// The query is expected to have about `n` features in all.
+    pub fn set_expected_total(&mut self, n: f64) {
+        self.voter.set_expected_total(n);
+    }
+
+    /// Running statistics of the votes.
+    pub fn tally(&self) -> &Tally {
+        self.voter.tally()
+    }
+
+    /// Features given so far, over all batches.
+    pub fn fed(&self) -> usize {
+        self.fed
+    }
+
+    /// (feature number over all batches, word) of each feature voted so far.
+    pub fn voted(&self) -> &[(u32, u32)] {
+        &self.voted
+    }
+
+    /// Vote a batch of `count` features in a random order drawn from the
+    /// seed. `quantize(indices, words)` fills `words[..indices.len()]` with
+    /// the words of the batch's features at `indices` (numbered in the batch
+    /// from 0). Returns whether the search has stopped.
+    pub fn feed(&mut self, count: usize, mut quantize: impl FnMut(&[u32], &mut [u32])) -> bool {
+        if self.stopped() {
+            return true;
+        }
+        let order = permute::permutation(count, batch_seed(self.options.seed, self.batches));
+        let offset = self.fed as u32;
+        self.batches += 1;
+        self.fed += count;
+        let block = self.options.block.max(1);
+        for indices in order.chunks(block) {
+            if self.options.deadline.is_some_and(|d| Instant::now() >= d) {
+                self.stop = Some((StopKind::Deadline, "deadline passed".to_owned()));
+                return true;
+            }
+            let started = Instant::now();
+            quantize(indices, &mut self.words[..indices.len()]);
+            let quantized = Instant::now();
+            self.timings.quantize += quantized - started;
+            for (&i, &w) in indices.iter().zip(&self.words[..indices.len()]) {
+                self.voter.vote(w);
+                self.voted.push((offset + i, w));
+                if self.voter.tally().features >= self.options.min_features
+                    && let Some(why) = self.rule.check(&self.voter)
+                {
+                    self.stop = Some((StopKind::Rule, why));
+                    break;
+                }
+            }
+            self.timings.vote += quantized.elapsed();
+            if self.stopped() {
+                return true;
+            }
+        }
+        false
+    }
+
+    /// Rank the candidates and say why the search ended.
+    pub fn finish(self) -> SearchOutcome {
+        let (kind, detail) = self
+            .stop
+            .unwrap_or_else(|| (StopKind::Exhausted, "all features used".to_owned()));
+        let used = self.voter.tally().features;
+        SearchOutcome {
+            candidates: rank::top_n(&self.voter, self.options.top_n, self.options.min_score),
+            features_total: self.fed,
+            features_used: used,
+            stop: StopInfo {
+                kind,
+                at_feature: used,
+                detail,
+            },
+            timings: self.timings,
         }
     }
 }
@@ -114,11 +253,23 @@ pub fn search(
     descriptors: ArrayView2<'_, f32>,
     options: &SearchOptions,
 ) -> SearchOutcome {
+    let mut s = Search::new(map, options);
+    s.set_total(descriptors.nrows());
+    feed_descriptors(&mut s, quantizer, descriptors);
+    s.finish()
+}
+
+/// Feed one batch of descriptors, quantized block by block with `quantizer`.
+/// Returns whether the search has stopped.
+pub fn feed_descriptors(
+    search: &mut Search<'_>,
+    quantizer: &dyn Quantizer,
+    descriptors: ArrayView2<'_, f32>,
+) -> bool {
     let dim = descriptors.ncols();
-    let mut block = Array2::<f32>::zeros((options.block.max(1), dim));
-    search_with(map, descriptors.nrows(), options, |indices, words| {
-        for (dst, &i) in block.rows_mut().into_iter().zip(indices) {
-            let mut dst = dst;
+    let mut block = Array2::<f32>::zeros((search.options.block.max(1), dim));
+    search.feed(descriptors.nrows(), |indices, words| {
+        for (mut dst, &i) in block.rows_mut().into_iter().zip(indices) {
             dst.assign(&descriptors.row(i as usize));
         }
         quantizer.quantize(block.slice(ndarray::s![..indices.len(), ..]), words);
@@ -136,58 +287,18 @@ pub fn search_words(map: &MapIndex, words: &[u32], options: &SearchOptions) -> S
     })
 }
 
-/// The driver. `quantize(indices, words)` fills `words[..indices.len()]` with
-/// the words of the features at `indices` (original numbering).
+/// One batch of `total` features. `quantize(indices, words)` fills
+/// `words[..indices.len()]` with the words of the features at `indices`.
 pub fn search_with(
     map: &MapIndex,
     total: usize,
     options: &SearchOptions,
-    mut quantize: impl FnMut(&[u32], &mut [u32]),
+    quantize: impl FnMut(&[u32], &mut [u32]),
 ) -> SearchOutcome {
-    let view = map.view();
-    let order = permute::permutation(total, options.seed);
-    let mut rule = options.rule.build(&stop::RuleContext {
-        top_n: options.top_n,
-    });
-    let mut voter = Voter::with_needs(&view, total, rule.needs());
-    let mut words = vec![0u32; options.block.max(1)];
-    let mut timings = SearchTimings::default();
-    let mut stop = None;
-    'blocks: for indices in order.chunks(options.block.max(1)) {
-        if options.deadline.is_some_and(|d| Instant::now() >= d) {
-            stop = Some((StopKind::Deadline, "deadline passed".to_owned()));
-            break;
-        }
-        let started = Instant::now();
-        quantize(indices, &mut words[..indices.len()]);
-        let quantized = Instant::now();
-        timings.quantize += quantized - started;
-        for &w in &words[..indices.len()] {
-            voter.vote(w);
-            if voter.tally().features >= options.min_features
-                && let Some(why) = rule.check(&voter)
-            {
-                stop = Some((StopKind::Rule, why));
-                timings.vote += quantized.elapsed();
-                break 'blocks;
-            }
-        }
-        timings.vote += quantized.elapsed();
-    }
-    let (kind, detail) =
-        stop.unwrap_or_else(|| (StopKind::Exhausted, "all features used".to_owned()));
-    let used = voter.tally().features;
-    SearchOutcome {
-        candidates: rank::top_n(&voter, options.top_n, options.min_score),
-        features_total: total,
-        features_used: used,
-        stop: StopInfo {
-            kind,
-            at_feature: used,
-            detail,
-        },
-        timings,
-    }
+    let mut s = Search::new(map, options);
+    s.set_total(total);
+    s.feed(total, quantize);
+    s.finish()
 }
 
 #[cfg(test)]

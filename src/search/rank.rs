@@ -1,6 +1,7 @@
-//! Ranking: the top-n map images by vote, with each score rescaled to an
-//! estimate of its full bag-of-words score so scores compare across queries
-//! whatever the stop point.
+//! Ranking: the top-n map images by vote, each score the mean vote per
+//! feature so far — an estimate of its full bag-of-words score, so scores
+//! compare across queries whatever the stop point and whether or not the
+//! query's feature count is known.
 
 use super::vote::Voter;
 
@@ -8,8 +9,8 @@ use super::vote::Voter;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ranked {
     pub id: u32,
-    /// h(j)·N/t: under a uniformly random feature order the partial sum over t
-    /// of N features, scaled by N/t, is an unbiased estimate of the full h(j).
+    /// h(j)/t, the mean vote per feature: under a uniformly random feature
+    /// order an unbiased estimate of the full tf-idf score h_N(j)/N.
     pub score: f32,
 }
 
@@ -20,7 +21,7 @@ pub fn top_n(voter: &Voter<'_>, n: usize, min_score: f32) -> Vec<Ranked> {
     if t.features == 0 || n == 0 {
         return Vec::new();
     }
-    let scale = t.total as f32 / t.features as f32;
+    let scale = 1.0 / t.features as f32;
     let h = voter.histogram();
     let mut ids: Vec<u32> = voter.touched().to_vec();
     let better = |a: &u32, b: &u32| {

@@ -1,8 +1,10 @@
 //! The voter: applies one quantized feature at a time to the vote histogram
 //! over map images and keeps, incrementally, the statistics the stopping rules
-//! read. A feature of word w adds idf(w)·d̂_j(w)/N to h(j) for every image j in
-//! postings(w), so after all N features h(j) = q·d̂_j. The cost of a vote is the
-//! length of w's posting list; nothing scans the whole map.
+//! read. A feature of word w adds idf(w)·d̂_j(w) to h(j) for every image j in
+//! postings(w), so after all N features h(j)/N = q·d̂_j, the tf-idf score.
+//! Votes are not divided by N: with streaming extraction N is not known until
+//! the last tile, and nothing here needs it. The cost of a vote is the length
+//! of w's posting list; nothing scans the whole map.
 
 use crate::index::{MapView, Postings};
 
@@ -11,8 +13,12 @@ use crate::index::{MapView, Postings};
 pub struct Tally {
     /// Features voted so far (t).
     pub features: usize,
-    /// Features in the query (N).
-    pub total: usize,
+    /// Features in the query (N), once known: when the whole image has been
+    /// extracted. `None` while tiles remain.
+    pub total: Option<usize>,
+    /// Best estimate of N while it is unknown (features so far scaled by the
+    /// share of the image extracted); equal to N once known.
+    pub expected_total: Option<f64>,
     /// Map images (size of the histogram).
     pub images: usize,
     /// Image with the highest vote, if any vote was cast.
@@ -23,7 +29,7 @@ pub struct Tally {
     pub second: f32,
     /// Σ h, for the mean.
     pub sum: f64,
-    /// Largest vote one feature can give one image, idf(w)·d̂_j(w)/N over all
+    /// Largest vote one feature can give one image, idf(w)·d̂_j(w) over all
     /// w and j: per-feature votes scaled by it lie in [0, 1].
     pub vote_cap: f32,
 }
@@ -38,9 +44,18 @@ impl Tally {
         }
     }
 
-    /// Features not voted yet.
-    pub fn remaining(&self) -> usize {
-        self.total - self.features
+    /// Features not voted yet, when N is known.
+    pub fn remaining(&self) -> Option<usize> {
+        self.total.map(|n| n.saturating_sub(self.features))
+    }
+
+    /// N if known, else its estimate, else the features seen so far.
+    pub fn total_or_estimate(&self) -> f64 {
+        match (self.total, self.expected_total) {
+            (Some(n), _) => n as f64,
+            (None, Some(e)) => e.max(self.features as f64),
+            (None, None) => self.features as f64,
+        }
     }
 }
 
@@ -125,21 +140,19 @@ pub struct Voter<'a> {
     top: TopK,
     /// Σ v² per image, with its own top 2, when a rule needs them.
     squares: Option<(Vec<f32>, TopK)>,
-    scale: f32,
     tally: Tally,
 }
 
 impl<'a> Voter<'a> {
-    /// A voter for a query of `total` features over `map`.
-    pub fn new(map: &MapView<'a>, total: usize) -> Self {
-        Self::with_needs(map, total, Needs::default())
+    /// A voter for a query over `map`.
+    pub fn new(map: &MapView<'a>) -> Self {
+        Self::with_needs(map, Needs::default())
     }
 
     /// A voter that also tracks what `needs` asks for.
-    pub fn with_needs(map: &MapView<'a>, total: usize, needs: Needs) -> Self {
+    pub fn with_needs(map: &MapView<'a>, needs: Needs) -> Self {
         let images = map.image_max.len();
-        let scale = 1.0 / total.max(1) as f32;
-        let vote_cap = map.image_max.iter().copied().fold(0.0, f32::max) * scale;
+        let vote_cap = map.image_max.iter().copied().fold(0.0, f32::max);
         Self {
             postings: map.postings,
             idf: map.idf,
@@ -148,9 +161,7 @@ impl<'a> Voter<'a> {
             touched: Vec::new(),
             top: TopK::new(needs.top.max(2)),
             squares: needs.squares.then(|| (vec![0.0; images], TopK::new(2))),
-            scale,
             tally: Tally {
-                total,
                 images,
                 vote_cap,
                 ..Tally::default()
@@ -158,11 +169,24 @@ impl<'a> Voter<'a> {
         }
     }
 
+    /// The query has exactly `n` features.
+    pub fn set_total(&mut self, n: usize) {
+        self.tally.total = Some(n);
+        self.tally.expected_total = Some(n as f64);
+    }
+
+    /// The query is expected to have about `n` features (N still unknown).
+    pub fn set_expected_total(&mut self, n: f64) {
+        if self.tally.total.is_none() {
+            self.tally.expected_total = Some(n);
+        }
+    }
+
     /// Apply the votes of one feature quantized to word `w`.
     #[inline]
     pub fn vote(&mut self, w: u32) {
         self.tally.features += 1;
-        let factor = self.idf.get(w as usize).copied().unwrap_or(0.0) * self.scale;
+        let factor = self.idf.get(w as usize).copied().unwrap_or(0.0);
         if factor <= 0.0 {
             return;
         }
@@ -236,7 +260,7 @@ impl<'a> Voter<'a> {
 
     /// Upper bound on what one more feature can add to h(j).
     pub fn image_vote_cap(&self, j: u32) -> f32 {
-        self.image_max.get(j as usize).copied().unwrap_or(0.0) * self.scale
+        self.image_max.get(j as usize).copied().unwrap_or(0.0)
     }
 }
 
@@ -259,11 +283,11 @@ mod tests {
             top: 3,
             squares: true,
         };
-        let mut voter = Voter::with_needs(&view, stream.len(), needs);
+        let mut voter = Voter::with_needs(&view, needs);
         let mut squares = [0f32; 5];
         for &w in &stream {
             let (ids, ds) = view.postings.list(w);
-            let factor = view.idf[w as usize] / stream.len() as f32;
+            let factor = view.idf[w as usize];
             for (&j, &d) in ids.iter().zip(ds) {
                 squares[j as usize] += (factor * d) * (factor * d);
             }

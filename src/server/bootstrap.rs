@@ -97,6 +97,7 @@ pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
         let groups = localizer.vocab.tree_quantizer().groups();
         tracing::info!(groups, "quantization tree built");
     }
+    localizer.tiles = config.tiles().map_err(anyhow::Error::msg)?;
     let cap = config.limits.max_features;
     let sift = &mut localizer.extract.sift;
     if cap > 0 && (sift.max_features == 0 || sift.max_features > cap) {

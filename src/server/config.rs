@@ -81,6 +81,9 @@ pub struct SearchDefaults {
     pub quantizer: String,
     /// Groups the tree quantizer searches per descriptor.
     pub tree_probes: usize,
+    /// Streaming extraction: `COLSxROWS+MARGIN` tiles extracted one by one
+    /// until the rule stops the search; `1x1` extracts the whole image first.
+    pub tiles: String,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -157,6 +160,7 @@ impl Default for SearchDefaults {
             min_score: o.min_score,
             quantizer: "exact".into(),
             tree_probes: 16,
+            tiles: "2x2+24".into(),
         }
     }
 }
@@ -346,6 +350,9 @@ impl Config {
         if let Err(e) = self.quantizer() {
             return bad("search.quantizer / search.tree_probes", e);
         }
+        if let Err(e) = self.tiles() {
+            return bad("search.tiles", e);
+        }
         if s.top_n == 0 || s.top_n > self.limits.max_top_n {
             return bad(
                 "search.top_n",
@@ -421,6 +428,11 @@ impl Config {
                 "unknown quantizer `{other}`; use `exact` or `tree`"
             )),
         }
+    }
+
+    /// The tile grid of streaming extraction.
+    pub fn tiles(&self) -> Result<crate::features::TileGrid, String> {
+        self.search.tiles.parse()
     }
 
     /// The default rule with its parameter.

@@ -7,6 +7,7 @@ use super::errors::{ApiError, ErrorBody};
 use super::openapi::Binary;
 use super::proto;
 use super::workers::PoolError;
+use crate::features::TileGrid;
 use crate::report::Localization;
 use crate::search::stop::{rule_info, rule_names};
 use crate::search::{RuleSpec, SearchOptions};
@@ -56,6 +57,10 @@ pub struct LocalizeParams {
     /// rule, to 0 when it names another.
     #[param(value_type = Option<u32>, minimum = 0)]
     pub min_features: Option<String>,
+    /// Streaming extraction's tile grid, `COLSxROWS` or `COLSxROWS+MARGIN`
+    /// (`1x1`: extract the whole image first). Default: the configured grid.
+    #[param(value_type = Option<String>, example = "2x2+24")]
+    pub tiles: Option<String>,
 }
 
 /// What a request may ask for within the configuration.
@@ -118,6 +123,17 @@ impl LocalizeParams {
             o.min_score = s as f32;
         }
         Ok(o)
+    }
+
+    /// The tile grid asked for, or `default`.
+    pub fn tiles(&self, default: TileGrid) -> Result<TileGrid, ApiError> {
+        match &self.tiles {
+            None => Ok(default),
+            Some(v) => v
+                .trim()
+                .parse()
+                .map_err(|e: String| ApiError::invalid_parameter("tiles", e)),
+        }
     }
 
     /// The rule and its parameter.
@@ -399,7 +415,9 @@ pub async fn localize(
     let deadline = arrived + state.config.deadline();
     let localizer = state.localizer()?;
     let format = Format::from_accept(request.headers());
-    let mut options = LocalizeParams::from_query(query.as_deref())?.options(&state.defaults)?;
+    let params = LocalizeParams::from_query(query.as_deref())?;
+    let mut options = params.options(&state.defaults)?;
+    let tiles = params.tiles(localizer.tiles)?;
     options.deadline = Some(deadline);
     // A body still arriving at the deadline is not waited for.
     let image = tokio::time::timeout_at(deadline.into(), read_image(&state, request))
@@ -413,7 +431,7 @@ pub async fn localize(
             if Instant::now() >= deadline {
                 return Err(ApiError::deadline_exceeded()); // no work for a lost cause
             }
-            Ok(localizer.localize(&image, &options)?)
+            Ok(localizer.localize_tiled(&image, &options, tiles)?)
         })
         .await
         .map_err(|e| match e {

@@ -42,6 +42,12 @@ impl From<&Localization> for pb::Localization {
                 total: a.features.total as u64,
                 used: a.features.used as u64,
                 fraction: a.features.fraction,
+                extracted: a.features.extracted as u64,
+            }),
+            tiles: Some(pb::TileUse {
+                extracted: a.tiles.extracted as u32,
+                total: a.tiles.total as u32,
+                grid: a.tiles.grid.to_string(),
             }),
             rule: Some(pb::Rule {
                 name: a.rule.name.clone(),

@@ -16,7 +16,12 @@
 //! It is made anytime-valid by spending δ' = δ / ((M − 1)·t·(t + 1)) at step t
 //! on each of the M − 1 challengers (Σ_t 1/(t(t+1)) = 1), so with probability
 //! at least 1 − δ the rule never stops on a leader that full bag-of-words
-//! would not rank first. The check is made conservative in O(1): x̄ uses the
+//! would not rank first. While N is unknown (tiles left to extract) the
+//! finite-population factor is dropped (ρ = 1, the with-replacement bound,
+//! which is valid for sampling without replacement too). With tiled
+//! extraction the order is random within a tile and between tiles, not over
+//! the whole image, so the guarantee is exact only for whole-image extraction.
+//! The check is made conservative in O(1): x̄ uses the
 //! strongest challenger, σ̂² ≤ (Σv_L² + max_j Σv_j²)/t (votes are
 //! non-negative, so the cross term only lowers it), and the range b − a uses
 //! cap_L plus the largest cap of the map.
@@ -44,13 +49,20 @@ struct Confident(f64);
 
 /// Lower confidence bound on the population mean of N values in a range of
 /// width `range`, from t draws without replacement with mean `mean` and
-/// standard deviation at most `sd`, at level δ.
-pub fn serfling_lower_bound(mean: f64, sd: f64, range: f64, t: usize, n: usize, delta: f64) -> f64 {
-    let (t_f, n_f) = (t as f64, n as f64);
-    let rho = if 2 * t <= n {
-        1.0 - (t_f - 1.0) / n_f
-    } else {
-        (1.0 - t_f / n_f) * (1.0 + 1.0 / t_f)
+/// standard deviation at most `sd`, at level δ (N unknown: `None`).
+pub fn serfling_lower_bound(
+    mean: f64,
+    sd: f64,
+    range: f64,
+    t: usize,
+    n: Option<usize>,
+    delta: f64,
+) -> f64 {
+    let t_f = t as f64;
+    let rho = match n {
+        None => 1.0,
+        Some(n) if 2 * t <= n => 1.0 - (t_f - 1.0) / n as f64,
+        Some(n) => (1.0 - t_f / n as f64) * (1.0 + 1.0 / t_f),
     };
     let log = (5.0 / delta).ln();
     mean - sd * (2.0 * rho * log / t_f).sqrt() - KAPPA * range * log / t_f
@@ -71,8 +83,9 @@ impl StopRule for Confident {
         if t < 2 || images < 2 || tally.max <= tally.second {
             return None;
         }
-        let left = tally.remaining() as f32;
-        if tally.max - tally.second > left * tally.vote_cap * (1.0 + 1e-5) {
+        if let Some(left) = tally.remaining()
+            && tally.max - tally.second > left as f32 * tally.vote_cap * (1.0 + 1e-5)
+        {
             return Some(format!(
                 "leader certain: lead exceeds what {left} features left can add"
             ));
@@ -100,18 +113,18 @@ mod tests {
 
     #[test]
     fn bound_tightens_with_samples_and_without_replacement() {
-        let b = |t| serfling_lower_bound(0.1, 0.2, 1.0, t, 10_000, 0.05);
+        let b = |t| serfling_lower_bound(0.1, 0.2, 1.0, t, Some(10_000), 0.05);
         assert!(b(10) < b(100) && b(100) < b(1000));
         // the finite-population factor helps once most of the set is seen
-        let near_end = serfling_lower_bound(0.1, 0.2, 1.0, 9_990, 10_000, 0.05);
+        let near_end = serfling_lower_bound(0.1, 0.2, 1.0, 9_990, Some(10_000), 0.05);
         let infinite = 0.1
             - 0.2 * (2.0 * (5.0f64 / 0.05).ln() / 9_990.0).sqrt()
             - KAPPA * (5.0f64 / 0.05).ln() / 9_990.0;
         assert!(near_end > infinite);
         // a smaller δ gives a lower bound
         assert!(
-            serfling_lower_bound(0.1, 0.2, 1.0, 100, 1000, 0.001)
-                < serfling_lower_bound(0.1, 0.2, 1.0, 100, 1000, 0.1)
+            serfling_lower_bound(0.1, 0.2, 1.0, 100, Some(1000), 0.001)
+                < serfling_lower_bound(0.1, 0.2, 1.0, 100, Some(1000), 0.1)
         );
     }
 }

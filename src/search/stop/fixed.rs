@@ -1,5 +1,6 @@
 //! Rule `fixed` (f): stop after a fixed fraction f of the features — the
-//! naive baseline every adaptive rule must beat.
+//! naive baseline every adaptive rule must beat. While the query's feature
+//! count N is unknown (tiles left to extract) the fraction is of its estimate.
 
 use super::{RuleInfo, StopRule, unit_interval};
 use crate::search::vote::Voter;
@@ -16,7 +17,7 @@ struct Fixed(f64);
 impl StopRule for Fixed {
     fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
         let t = voter.tally();
-        let needed = (self.0 * t.total as f64).ceil() as usize;
+        let needed = (self.0 * t.total_or_estimate()).ceil() as usize;
         (t.features >= needed.max(1)).then(|| format!("fixed fraction {} reached", self.0))
     }
 }

@@ -2,7 +2,10 @@
 //! change the top-n answer, so the ranking is identical to full bag-of-words
 //! by construction.
 //!
-//! One more feature adds at most cap_j = max_w idf(w)·d̂_j(w)/N to h(j), so
+//! It needs the number of features left, so it can only fire once the query's
+//! feature count N is known (with tiled extraction: after the last tile).
+//!
+//! One more feature adds at most cap_j = max_w idf(w)·d̂_j(w) to h(j), so
 //! with R features left h(j) can still grow by at most R·cap_j and never
 //! shrinks. With the current leaders a_1 … a_n (best first), the answer is
 //! final once
@@ -50,7 +53,7 @@ impl StopRule for Lossless {
 
     fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
         let t = voter.tally();
-        let left = t.remaining() as f32;
+        let left = t.remaining()? as f32;
         let top = voter.top();
         let n = self.n.min(t.images);
         if top.len() < n {

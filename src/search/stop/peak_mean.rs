@@ -1,4 +1,9 @@
 //! Rule 1 (`peak-mean`): stop when max(h) − mean(h) > T.
+//!
+//! The paper's h is divided by the query's feature count N; bowloc's is not
+//! (N is unknown while tiles remain), so T measures accumulated evidence: the
+//! same T asks the same lead of a 100-feature and of a 2000-feature query. A
+//! paper threshold T′ corresponds to T = T′·N.
 
 use super::{RuleInfo, StopRule, non_negative};
 use crate::search::vote::Voter;

@@ -1,5 +1,5 @@
 //! Each rule on hand-built vote streams. The map has 4 images, image j holding
-//! only word j, so a feature of word j adds exactly u = ln(4)/N to h(j) and
+//! only word j, so a feature of word j adds exactly U = ln(4) to h(j) and
 //! nothing elsewhere: every statistic along a stream is known by hand.
 
 use super::*;
@@ -19,7 +19,8 @@ fn one_word_per_image() -> MapIndex {
 fn stops_at(spec: RuleSpec, stream: &[u32], total: usize, from: usize) -> Option<usize> {
     let map = one_word_per_image();
     let view = map.view();
-    let mut voter = Voter::new(&view, total);
+    let mut voter = Voter::new(&view);
+    voter.set_total(total);
     let mut rule = spec.build(&RuleContext::default());
     for &w in stream {
         voter.vote(w);
@@ -30,9 +31,8 @@ fn stops_at(spec: RuleSpec, stream: &[u32], total: usize, from: usize) -> Option
     None
 }
 
-fn u(total: usize) -> f64 {
-    4f64.ln() / total as f64
-}
+/// The vote of one feature for its image.
+const U: f64 = std::f64::consts::LN_2 * 2.0;
 
 fn spec(name: &str, p: f64) -> RuleSpec {
     RuleSpec::new(name, Some(p)).unwrap()
@@ -43,10 +43,10 @@ fn peak_mean_stops_exactly_when_gap_exceeds_threshold() {
     // max − mean along [0,1,0,0,0]: 0.75u, 0.5u, 1.25u, 2u, 2.75u
     let s = [0, 1, 0, 0, 0];
     let n = 10;
-    assert_eq!(stops_at(spec("peak-mean", 1.5 * u(n)), &s, n, 1), Some(4));
-    assert_eq!(stops_at(spec("peak-mean", 0.6 * u(n)), &s, n, 1), Some(1));
-    assert_eq!(stops_at(spec("peak-mean", 2.5 * u(n)), &s, n, 1), Some(5));
-    assert_eq!(stops_at(spec("peak-mean", 3.0 * u(n)), &s, n, 1), None);
+    assert_eq!(stops_at(spec("peak-mean", 1.5 * U), &s, n, 1), Some(4));
+    assert_eq!(stops_at(spec("peak-mean", 0.6 * U), &s, n, 1), Some(1));
+    assert_eq!(stops_at(spec("peak-mean", 2.5 * U), &s, n, 1), Some(5));
+    assert_eq!(stops_at(spec("peak-mean", 3.0 * U), &s, n, 1), None);
 }
 
 #[test]
@@ -114,12 +114,12 @@ fn lossless_orders_the_whole_top_n() {
     let stream = [0, 1, 0, 1, 0, 0, 0, 0, 0, 0, 0, 1];
     let mut voter = Voter::with_needs(
         &view,
-        stream.len(),
         Needs {
             top: 3,
             squares: false,
         },
     );
+    voter.set_total(stream.len());
     let mut rule = RuleSpec::new("lossless", None)
         .unwrap()
         .build(&RuleContext { top_n: 2 });
@@ -150,6 +150,29 @@ fn confident_needs_more_evidence_for_smaller_delta() {
     // alternating leaders give no evidence
     let alt: Vec<u32> = (0..400).map(|i| i % 2).collect();
     assert_eq!(stops_at(spec("confident", 0.1), &alt, 400, 1), None);
+}
+
+#[test]
+fn rules_that_need_n_wait_while_it_is_unknown() {
+    // lossless cannot bound what is left without N; fixed uses the estimate
+    let map = one_word_per_image();
+    let view = map.view();
+    let mut voter = Voter::new(&view);
+    let mut lossless = RuleSpec::new("lossless", None)
+        .unwrap()
+        .build(&RuleContext::default());
+    let mut fixed = spec("fixed", 0.5).build(&RuleContext::default());
+    voter.set_expected_total(8.0);
+    for _ in 0..3 {
+        voter.vote(0);
+        assert!(lossless.check(&voter).is_none());
+        assert!(fixed.check(&voter).is_none());
+    }
+    voter.vote(0);
+    assert!(fixed.check(&voter).is_some(), "4 of about 8 features");
+    assert!(lossless.check(&voter).is_none());
+    voter.set_total(5);
+    assert!(lossless.check(&voter).is_some(), "4u > 1 feature left");
 }
 
 #[test]

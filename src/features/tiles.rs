@@ -1,0 +1,226 @@
+//! Streaming extraction: the extraction frame cut into a grid of tiles, each
+//! extracted on demand, so a search that stops early never pays for the tiles
+//! it did not need. A tile is detected on its core rectangle grown by a margin
+//! (so a keypoint near a border sees its neighbourhood) and keeps only the
+//! keypoints whose centre lies in its core: every keypoint is found once.
+
+use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage};
+use serde::{Deserialize, Serialize};
+
+/// How a query is cut into tiles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TileGrid {
+    /// Tiles across and down (1 × 1: the whole image as one batch).
+    pub cols: u32,
+    pub rows: u32,
+    /// Pixels of context around each tile's core, in the extraction frame.
+    pub margin: u32,
+}
+
+impl TileGrid {
+    /// The whole image in one piece.
+    pub const WHOLE: Self = Self {
+        cols: 1,
+        rows: 1,
+        margin: 0,
+    };
+
+    /// Smallest tile side: a grid is coarsened so no core is narrower.
+    pub const MIN_CORE: u32 = 64;
+
+    /// Tiles in the grid.
+    pub fn count(&self) -> usize {
+        (self.cols.max(1) * self.rows.max(1)) as usize
+    }
+
+    /// Check the grid's numbers.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(1..=16).contains(&self.cols) || !(1..=16).contains(&self.rows) {
+            return Err(format!(
+                "tile grid {}×{}: columns and rows must each lie in 1..=16",
+                self.cols, self.rows
+            ));
+        }
+        if self.margin > 256 {
+            return Err(format!("tile margin {} px exceeds 256", self.margin));
+        }
+        Ok(())
+    }
+
+    /// The core rectangles (x, y, width, height) of a `width × height`
+    /// frame, row by row. A small frame gets fewer, larger tiles (no core
+    /// under [`Self::MIN_CORE`] pixels), down to one.
+    pub fn cores(&self, width: u32, height: u32) -> Vec<(u32, u32, u32, u32)> {
+        let cols = self.cols.max(1).min((width / Self::MIN_CORE).max(1));
+        let rows = self.rows.max(1).min((height / Self::MIN_CORE).max(1));
+        let edges = |n: u32, len: u32| -> Vec<u32> {
+            (0..=n)
+                .map(|i| (i as u64 * len as u64 / n as u64) as u32)
+                .collect()
+        };
+        let (xs, ys) = (edges(cols, width), edges(rows, height));
+        let mut out = Vec::with_capacity((cols * rows) as usize);
+        for r in 0..rows as usize {
+            for c in 0..cols as usize {
+                out.push((xs[c], ys[r], xs[c + 1] - xs[c], ys[r + 1] - ys[r]));
+            }
+        }
+        out
+    }
+}
+
+impl std::fmt::Display for TileGrid {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}x{}+{}", self.cols, self.rows, self.margin)
+    }
+}
+
+impl std::str::FromStr for TileGrid {
+    type Err = String;
+
+    /// `COLSxROWS` or `COLSxROWS+MARGIN` (margin in pixels, default 24).
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("tile grid `{s}`: expected COLSxROWS[+MARGIN], e.g. 2x2+24");
+        let (grid, margin) = match s.split_once('+') {
+            Some((g, m)) => (g, m.trim().parse().map_err(|_| bad())?),
+            None => (s, 24),
+        };
+        let (c, r) = grid.split_once(['x', 'X', '×']).ok_or_else(bad)?;
+        let t = Self {
+            cols: c.trim().parse().map_err(|_| bad())?,
+            rows: r.trim().parse().map_err(|_| bad())?,
+            margin,
+        };
+        t.validate()?;
+        Ok(t)
+    }
+}
+
+/// The tiles of one image, extracted one at a time in a given order.
+pub struct Tiles {
+    frame: Frame,
+    cores: Vec<(u32, u32, u32, u32)>,
+    margin: u32,
+    /// Tile numbers in extraction order.
+    order: Vec<usize>,
+    next: usize,
+    /// Keypoints the image may keep (0 = all), shared out over the tiles.
+    cap: usize,
+}
+
+impl Tiles {
+    /// Prepare `image` for tiled extraction. `order(n)` gives the order of the
+    /// n tiles (a permutation of 0..n); the grid may have been coarsened for a
+    /// small image, so n is known only here.
+    pub fn new(
+        image: &GrayImage,
+        config: &ExtractConfig,
+        grid: TileGrid,
+        order: impl FnOnce(usize) -> Vec<u32>,
+    ) -> Result<Self, FeatureError> {
+        let frame = Frame::new(image, config)?;
+        let (w, h) = frame.size();
+        let cores = grid.cores(w, h);
+        let n = cores.len();
+        let order: Vec<usize> = order(n).into_iter().map(|i| i as usize).collect();
+        debug_assert_eq!(order.len(), n);
+        let cap = config.sift.max_features as usize;
+        Ok(Self {
+            frame,
+            cores,
+            margin: if n == 1 { 0 } else { grid.margin },
+            order,
+            next: 0,
+            cap,
+        })
+    }
+
+    /// Tiles in all.
+    pub fn total(&self) -> usize {
+        self.cores.len()
+    }
+
+    /// Tiles extracted so far.
+    pub fn extracted(&self) -> usize {
+        self.next
+    }
+
+    /// Share of the frame's area extracted so far.
+    pub fn area_extracted(&self) -> f64 {
+        let (w, h) = self.frame.size();
+        let all = (w as f64 * h as f64).max(1.0);
+        self.order[..self.next]
+            .iter()
+            .map(|&i| self.cores[i].2 as f64 * self.cores[i].3 as f64)
+            .sum::<f64>()
+            / all
+    }
+
+    /// Extract the next tile: its features in frame coordinates.
+    pub fn next_tile(&mut self) -> Option<Result<Features, FeatureError>> {
+        let &tile = self.order.get(self.next)?;
+        self.next += 1;
+        let core = self.cores[tile];
+        let m = self.margin;
+        let region = (
+            core.0.saturating_sub(m),
+            core.1.saturating_sub(m),
+            core.2 + m + core.0.min(m),
+            core.3 + m + core.1.min(m),
+        );
+        Some(
+            self.frame
+                .detect(region, core, self.tile_cap(self.next - 1)),
+        )
+    }
+
+    /// The cap of the k-th tile extracted: the image's cap split evenly, the
+    /// remainder to the first tiles, so the tiles' caps add up to the image's.
+    fn tile_cap(&self, k: usize) -> usize {
+        if self.cap == 0 {
+            return 0;
+        }
+        let n = self.total();
+        (self.cap / n + usize::from(k < self.cap % n)).max(1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cores_partition_the_frame() {
+        let g: TileGrid = "3x2+24".parse().unwrap();
+        let cores = g.cores(640, 360);
+        assert_eq!(cores.len(), 6);
+        let area: u32 = cores.iter().map(|c| c.2 * c.3).sum();
+        assert_eq!(area, 640 * 360);
+        assert_eq!(cores[0], (0, 0, 213, 180));
+        assert_eq!(cores[5], (426, 180, 214, 180));
+    }
+
+    #[test]
+    fn small_frames_get_fewer_tiles() {
+        let g: TileGrid = "4x4".parse().unwrap();
+        assert_eq!(g.cores(160, 120).len(), 2);
+        assert_eq!(g.cores(40, 30), vec![(0, 0, 40, 30)]);
+    }
+
+    #[test]
+    fn grids_parse_and_are_checked() {
+        assert_eq!(
+            "2x2".parse::<TileGrid>().unwrap(),
+            TileGrid {
+                cols: 2,
+                rows: 2,
+                margin: 24
+            }
+        );
+        assert_eq!("1x1+0".parse::<TileGrid>().unwrap(), TileGrid::WHOLE);
+        for bad in ["", "2", "0x2", "2x17", "2x2+x", "2x2+999", "axb"] {
+            assert!(bad.parse::<TileGrid>().is_err(), "{bad}");
+        }
+    }
+}

@@ -1,0 +1,19 @@
+//! Image geometry as plain numbers: where a feature sits in its image. The
+//! extraction edge fills these from OpenCV's keypoints; the map stores them
+//! per image feature, and verification matches them between a query and a
+//! candidate. No OpenCV types here.
+
+/// A feature's keypoint in the extraction frame (the downscaled image the
+/// descriptors were computed on): centre, size and orientation.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Keypoint {
+    /// Centre, in pixels of the extraction frame.
+    pub x: f32,
+    pub y: f32,
+    /// Diameter of the described region, in pixels.
+    pub size: f32,
+    /// Orientation in degrees, [0, 360).
+    pub angle: f32,
+    /// Detector response (contrast): larger is stronger.
+    pub response: f32,
+}
