@@ -34,11 +34,50 @@ pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
 /// One image's descriptors and what reading them cost.
 #[derive(Debug, Clone)]
 pub struct Extracted {
+    /// Rows tile by tile, in grid order.
     pub descriptors: Descriptors,
     /// Reading and decoding the file.
     pub decode: Duration,
-    /// Feature extraction on the decoded image.
+    /// Feature extraction on the decoded image (all tiles).
     pub extract: Duration,
+    /// Each tile in grid order: its features, its share of the image's area
+    /// and its extraction time (one tile when extracted whole).
+    pub tiles: Vec<TileCost>,
+}
+
+/// What one tile of an image held and cost.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TileCost {
+    pub features: usize,
+    pub area: f64,
+    pub extract: Duration,
+}
+
+/// Extract a decoded image tile by tile in grid order, timing each tile.
+pub fn extract_tiled(
+    image: &features::GrayImage,
+    config: &ExtractConfig,
+    grid: TileGrid,
+) -> Result<(Descriptors, Vec<TileCost>), FeatureError> {
+    let mut tiles = Tiles::new(image, config, grid, |n| (0..n as u32).collect())?;
+    let mut parts = Vec::with_capacity(tiles.total());
+    let mut costs = Vec::with_capacity(tiles.total());
+    let mut area = 0.0;
+    loop {
+        let started = Instant::now();
+        let Some(tile) = tiles.next_tile() else { break };
+        let tile = tile?;
+        let share = tiles.area_extracted();
+        costs.push(TileCost {
+            features: tile.len(),
+            area: share - area,
+            extract: started.elapsed(),
+        });
+        area = share;
+        parts.push(tile.descriptors);
+    }
+    let refs: Vec<&Descriptors> = parts.iter().collect();
+    Ok((stack(&refs), costs))
 }
 
 /// Descriptors of every image, in parallel, one image per core. Images that
@@ -51,17 +90,19 @@ pub fn extract_all(
     strict: bool,
     what: &str,
 ) -> anyhow::Result<Vec<Option<Descriptors>>> {
-    let timed = extract_all_timed(images, config, limits, strict, what)?;
+    let timed = extract_all_timed(images, config, TileGrid::WHOLE, limits, strict, what)?;
     Ok(timed
         .into_iter()
         .map(|e| e.map(|e| e.descriptors))
         .collect())
 }
 
-/// [`extract_all`], keeping how long each image took to decode and extract.
+/// [`extract_all`], tile by tile with `grid`, keeping how long each image
+/// took to decode and each tile to extract.
 pub fn extract_all_timed(
     images: &[ImageRef],
     config: &ExtractConfig,
+    grid: TileGrid,
     limits: DecodeLimits,
     strict: bool,
     what: &str,
@@ -74,11 +115,12 @@ pub fn extract_all_timed(
             let started = Instant::now();
             let r = features::decode_file(&image.path, limits).and_then(|decoded| {
                 let read = started.elapsed();
-                let descriptors = features::extract(&decoded, config)?.descriptors;
+                let (descriptors, tiles) = extract_tiled(&decoded, config, grid)?;
                 Ok(Extracted {
                     descriptors,
                     decode: read,
                     extract: started.elapsed() - read,
+                    tiles,
                 })
             });
             bar.inc(1);
@@ -284,10 +326,6 @@ pub struct Localizer {
     pub tiles: TileGrid,
 }
 
-/// Salt of the tile order's seed, so the tile order and the order of the
-/// features inside the first tile are not drawn from the same stream.
-const TILE_ORDER_SALT: u64 = 0x7469_6c65_6f72_6465;
-
 impl Localizer {
     /// Open both files and check that the map was built with the vocabulary.
     pub fn open(vocab: &Path, map: &Path, verify: bool) -> anyhow::Result<Self> {
@@ -330,7 +368,7 @@ impl Localizer {
             height: image.height(),
         };
         let mut tiles = Tiles::new(&image, &self.extract, grid, |n| {
-            search::permute::permutation(n, options.seed ^ TILE_ORDER_SALT)
+            search::permute::tile_order(n, options.seed)
         })?;
         let mut extract = decoded.elapsed();
         let quantizer = self.vocab.quantizer(self.quantizer);
@@ -340,13 +378,10 @@ impl Localizer {
             let Some(tile) = tiles.next_tile() else { break };
             let tile = tile?;
             extract += t.elapsed();
-            let fed = search.fed() + tile.len();
-            if tiles.extracted() == tiles.total() {
-                search.set_total(fed);
-            } else {
-                search.set_expected_total(fed as f64 / tiles.area_extracted().max(1e-9));
-            }
-            if search::feed_descriptors(&mut search, &*quantizer, tile.descriptors.view()) {
+            let quantize =
+                search::descriptor_quantizer(&*quantizer, tile.descriptors.view(), options.block);
+            let last = tiles.extracted() == tiles.total();
+            if search.feed_tile(tile.len(), tiles.area_extracted(), last, quantize, None) {
                 break;
             }
         }

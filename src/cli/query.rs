@@ -1,6 +1,7 @@
 //! `bowloc query`: localize image files and print the answers as JSON.
 
 use super::args::SearchArgs;
+use bowloc::features::TileGrid;
 use bowloc::pipeline::Localizer;
 use clap::Args;
 use std::path::PathBuf;
@@ -18,10 +19,15 @@ pub struct QueryArgs {
     images: Vec<PathBuf>,
     #[command(flatten)]
     search: SearchArgs,
+    /// Streaming extraction's tile grid, COLSxROWS[+MARGIN] (1x1: the whole
+    /// image at once).
+    #[arg(long, default_value = "2x2+24")]
+    tiles: TileGrid,
 }
 
 pub fn run(a: QueryArgs) -> anyhow::Result<()> {
-    let localizer = Localizer::open(&a.vocab, &a.map, true)?;
+    let mut localizer = Localizer::open(&a.vocab, &a.map, true)?;
+    localizer.tiles = a.tiles;
     let options = a.search.options()?;
     let mut answers = Vec::with_capacity(a.images.len());
     for path in &a.images {

@@ -3,8 +3,9 @@
 //! found for a dataset, and running every setting over every Monte Carlo run
 //! and query on pre-quantized words.
 
+use super::tiles::Query;
 use crate::index::MapIndex;
-use crate::search::{Ranked, RuleSpec, SearchOptions, search_words};
+use crate::search::{Ranked, RuleSpec, SearchOptions, SearchOutcome, search_words};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -203,6 +204,10 @@ pub struct Outcome {
     pub total: u32,
     /// Time spent voting (and checking the rule), in milliseconds.
     pub vote_ms: f32,
+    /// Decoding and extracting the tiles extracted, in milliseconds.
+    pub extract_ms: f32,
+    /// Tiles extracted (1 for a query extracted whole).
+    pub tiles: u16,
 }
 
 impl Outcome {
@@ -216,6 +221,7 @@ impl Outcome {
     }
 }
 
+/// One search of a query known by its words, extracted whole at no cost.
 pub fn search_one(
     map: &MapIndex,
     words: &[u32],
@@ -224,20 +230,39 @@ pub fn search_one(
     top_n: usize,
 ) -> Outcome {
     let o = search_words(map, words, &setting.options(seed, top_n));
+    outcome(o, words.len(), 0.0, 1)
+}
+
+/// One search of a cached query, its tiles streamed as the service would.
+pub fn search_query(
+    map: &MapIndex,
+    query: &Query,
+    setting: &Setting,
+    seed: u64,
+    top_n: usize,
+) -> Outcome {
+    let (o, tiles, extract_ms) = query.search(map, &setting.options(seed, top_n));
+    outcome(o, query.words.len(), extract_ms, tiles)
+}
+
+/// `total`: the query's features, extracted or not.
+fn outcome(o: SearchOutcome, total: usize, extract_ms: f64, tiles: usize) -> Outcome {
     Outcome {
         candidates: o.candidates,
         used: o.features_used as u32,
-        total: o.features_total as u32,
+        total: total as u32,
         vote_ms: o.timings.vote.as_secs_f32() * 1e3,
+        extract_ms: extract_ms as f32,
+        tiles: tiles as u16,
     }
 }
 
 /// Mean fraction of features `setting` uses over all queries in `run`.
-pub fn mean_fraction(map: &MapIndex, queries: &[Vec<u32>], setting: &Setting, run: u32) -> f64 {
+pub fn mean_fraction(map: &MapIndex, queries: &[Query], setting: &Setting, run: u32) -> f64 {
     let total: f64 = queries
         .par_iter()
         .enumerate()
-        .map(|(q, words)| search_one(map, words, setting, seed(run, q), 1).fraction())
+        .map(|(q, query)| search_query(map, query, setting, seed(run, q), 1).fraction())
         .sum();
     total / queries.len().max(1) as f64
 }
@@ -333,7 +358,7 @@ pub fn bisect_edge(
 /// from one calibration run over all queries.
 pub fn calibrate(
     map: &MapIndex,
-    queries: &[Vec<u32>],
+    queries: &[Query],
     rule: &str,
     (lo, hi, whole): (f64, f64, bool),
     min_features: usize,
@@ -379,7 +404,7 @@ pub fn calibrate(
 /// warm-up, calibrated grids at every warm-up. Also returns the calibrations.
 pub fn plan(
     map: &MapIndex,
-    queries: &[Vec<u32>],
+    queries: &[Query],
     grids: &[&RuleGrid],
     warmups: &[usize],
     targets: &[f64],
@@ -431,7 +456,7 @@ pub fn plan(
 /// Run every setting on every query in every run: `result[setting][run][query]`.
 pub fn run_all(
     map: &MapIndex,
-    queries: &[Vec<u32>],
+    queries: &[Query],
     settings: &[Setting],
     runs: u32,
     top_n: usize,
@@ -440,11 +465,11 @@ pub fn run_all(
     let per_query: Vec<Vec<Outcome>> = queries
         .par_iter()
         .enumerate()
-        .map(|(q, words)| {
+        .map(|(q, query)| {
             let mut out = Vec::with_capacity(settings.len() * runs as usize);
             for s in settings {
                 for run in 0..runs {
-                    out.push(search_one(map, words, s, seed(run, q), top_n));
+                    out.push(search_query(map, query, s, seed(run, q), top_n));
                 }
             }
             bar.inc(1);
@@ -546,8 +571,8 @@ mod tests {
     #[test]
     fn fixed_fraction_uses_that_share_and_runs_are_laid_out_by_setting() {
         let map = toy_map();
-        let queries: Vec<Vec<u32>> = (0..5)
-            .map(|q| (0..40).map(|i| ((i * 7 + q) % 8) as u32).collect())
+        let queries: Vec<Query> = (0..5)
+            .map(|q| Query::whole((0..40).map(|i| ((i * 7 + q) % 8) as u32).collect()))
             .collect();
         let settings = vec![
             Setting {
@@ -576,11 +601,13 @@ mod tests {
     #[test]
     fn calibration_hits_reachable_targets_of_a_real_rule() {
         let map = toy_map();
-        let queries: Vec<Vec<u32>> = (0..6)
+        let queries: Vec<Query> = (0..6)
             .map(|q| {
-                (0..200)
-                    .map(|i| ((i * 5 + q * 3 + i / 7) % 8) as u32)
-                    .collect()
+                Query::whole(
+                    (0..200)
+                        .map(|i| ((i * 5 + q * 3 + i / 7) % 8) as u32)
+                        .collect(),
+                )
             })
             .collect();
         let bar = ProgressBar::hidden();

@@ -82,6 +82,13 @@ pub struct StageSample {
     pub vote: f64,
 }
 
+impl StageSample {
+    /// The request's time: every stage.
+    pub fn total(&self) -> f64 {
+        self.extract + self.quantize + self.vote
+    }
+}
+
 /// Quantiles of each stage and of their sum, in milliseconds.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct StageTimes {
@@ -101,7 +108,7 @@ pub fn summarize(samples: &[StageSample]) -> StageTimes {
         quantize: of(|s| s.quantize),
         vote: of(|s| s.vote),
         search: of(|s| s.quantize + s.vote),
-        total: of(|s| s.extract + s.quantize + s.vote),
+        total: of(StageSample::total),
     }
 }
 
