@@ -65,16 +65,16 @@ pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
         let defaults = FilesConfig::default();
         if files.vocabulary != defaults.vocabulary || files.map != defaults.map {
             bail!(
-                "{} is missing (bootstrap builds only the default files {} and {})",
-                missing_names(config),
+                "{} (bootstrap builds only the default files {} and {})",
+                missing(config),
                 defaults.vocabulary.display(),
                 defaults.map.display()
             );
         }
         if !config.bootstrap.enabled {
             bail!(
-                "{} is missing and bootstrap is disabled (bootstrap.enabled)",
-                missing_names(config)
+                "{} and bootstrap is disabled (bootstrap.enabled)",
+                missing(config)
             );
         }
         build_missing(config, vocab_missing, progress)?;
@@ -106,13 +106,15 @@ pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
     Ok(localizer)
 }
 
-fn missing_names(config: &Config) -> String {
-    [&config.files.vocabulary, &config.files.map]
+/// `A is missing` or `A and B are missing`.
+fn missing(config: &Config) -> String {
+    let names: Vec<String> = [&config.files.vocabulary, &config.files.map]
         .into_iter()
         .filter(|p| !p.exists())
         .map(|p| p.display().to_string())
-        .collect::<Vec<_>>()
-        .join(" and ")
+        .collect();
+    let verb = if names.len() > 1 { "are" } else { "is" };
+    format!("{} {verb} missing", names.join(" and "))
 }
 
 /// Build the map (and the vocabulary first, when `vocab_missing`) from the
@@ -122,9 +124,9 @@ fn build_missing(config: &Config, vocab_missing: bool, progress: &Progress) -> a
     let list = b.dataset.join("map.txt");
     if !list.is_file() {
         bail!(
-            "{} is missing, and the bootstrap dataset has no {} (set files.vocabulary and \
+            "{}, and the bootstrap dataset has no {} (set files.vocabulary and \
              files.map to existing files, or bootstrap.dataset to a dataset folder)",
-            missing_names(config),
+            missing(config),
             list.display()
         );
     }
@@ -238,7 +240,7 @@ mod tests {
         // a mistyped map path, bootstrap enabled with a real dataset
         c.files.map = dir.path().join("typo.bowmap");
         let e = load_err(&c);
-        assert!(e.contains("typo.bowmap is missing"), "{e}");
+        assert!(e.contains("typo.bowmap") && e.contains("missing"), "{e}");
         assert!(e.contains("only the default files"), "{e}");
         assert!(!c.files.map.exists());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);

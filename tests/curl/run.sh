@@ -601,7 +601,7 @@ dataset = "$RTAB"
 words = 200
 TOML
 cd "$TMP/boot" || exit 1
-startup_fails "--map naming a missing file (bootstrap on)" "a/typo.bowmap is missing (bootstrap builds only the default files" \
+startup_fails "--map naming a missing file (bootstrap on)" "a/typo.bowmap are missing (bootstrap builds only the default files" \
   config.toml -- --map a/typo.bowmap
 check "the mistyped map was not built" test ! -e "$TMP/boot/a"
 cd "$ROOT" || exit 1
