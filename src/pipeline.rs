@@ -1,11 +1,12 @@
-//! The glue every front end shares: extracting descriptors over image lists,
+//! The glue every front end shares: extracting features over image lists,
 //! building a vocabulary or a map from images, and answering one query
-//! (decode → extract → search → report).
+//! (decode → extract → search → verify → report).
 
 use crate::dataset::ImageRef;
-use crate::features::{
-    self, DecodeLimits, Descriptors, ExtractConfig, FeatureError, TileGrid, Tiles,
-};
+use crate::features::fit::OpenCvFit;
+use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
+use crate::geometry::Keypoint;
+use crate::geometry::verify::{LeaderVerifier, VerifyParams, rerank, with_keypoints};
 use crate::index::{ImageWords, MapBuilder, MapIndex, Places};
 use crate::quantize::{Quantizer, QuantizerKind};
 use crate::report::{EdgeTimings, Extraction, ImageSize, Localization};
@@ -31,11 +32,11 @@ pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
     bar
 }
 
-/// One image's descriptors and what reading them cost.
+/// One image's features and what reading them cost.
 #[derive(Debug, Clone)]
 pub struct Extracted {
-    /// Rows tile by tile, in grid order.
-    pub descriptors: Descriptors,
+    /// Keypoints and descriptor rows tile by tile, in grid order.
+    pub features: Features,
     /// Reading and decoding the file.
     pub decode: Duration,
     /// Feature extraction on the decoded image (all tiles).
@@ -58,7 +59,7 @@ pub fn extract_tiled(
     image: &features::GrayImage,
     config: &ExtractConfig,
     grid: TileGrid,
-) -> Result<(Descriptors, Vec<TileCost>), FeatureError> {
+) -> Result<(Features, Vec<TileCost>), FeatureError> {
     let mut tiles = Tiles::new(image, config, grid, |n| (0..n as u32).collect())?;
     let mut parts = Vec::with_capacity(tiles.total());
     let mut costs = Vec::with_capacity(tiles.total());
@@ -74,13 +75,21 @@ pub fn extract_tiled(
             extract: started.elapsed(),
         });
         area = share;
-        parts.push(tile.descriptors);
+        parts.push(tile);
     }
-    let refs: Vec<&Descriptors> = parts.iter().collect();
-    Ok((stack(&refs), costs))
+    let refs: Vec<&Features> = parts.iter().collect();
+    let features = Features {
+        descriptors: stack(&refs),
+        keypoints: parts
+            .iter()
+            .flat_map(|p| p.keypoints.iter().copied())
+            .collect(),
+    };
+    Ok((features, costs))
 }
 
-/// Descriptors of every image, in parallel, one image per core. Images that
+/// Features (keypoints and descriptors) of every image, in parallel, one
+/// image per core. Images that
 /// cannot be read or decoded are `None`, each named in a warning, with a count
 /// at the end; with `strict` the first one is an error.
 pub fn extract_all(
@@ -89,12 +98,9 @@ pub fn extract_all(
     limits: DecodeLimits,
     strict: bool,
     what: &str,
-) -> anyhow::Result<Vec<Option<Descriptors>>> {
+) -> anyhow::Result<Vec<Option<Features>>> {
     let timed = extract_all_timed(images, config, TileGrid::WHOLE, limits, strict, what)?;
-    Ok(timed
-        .into_iter()
-        .map(|e| e.map(|e| e.descriptors))
-        .collect())
+    Ok(timed.into_iter().map(|e| e.map(|e| e.features)).collect())
 }
 
 /// [`extract_all`], tile by tile with `grid`, keeping how long each image
@@ -115,9 +121,9 @@ pub fn extract_all_timed(
             let started = Instant::now();
             let r = features::decode_file(&image.path, limits).and_then(|decoded| {
                 let read = started.elapsed();
-                let (descriptors, tiles) = extract_tiled(&decoded, config, grid)?;
+                let (features, tiles) = extract_tiled(&decoded, config, grid)?;
                 Ok(Extracted {
-                    descriptors,
+                    features,
                     decode: read,
                     extract: started.elapsed() - read,
                     tiles,
@@ -133,7 +139,7 @@ pub fn extract_all_timed(
     for (image, result) in images.iter().zip(results) {
         match result {
             Ok(e) => {
-                if e.descriptors.nrows() == 0 {
+                if e.features.is_empty() {
                     tracing::warn!(image = %image.name, "no features found");
                 }
                 out.push(Some(e));
@@ -160,9 +166,9 @@ pub fn extract_all_timed(
     Ok(out)
 }
 
-/// Stack the rows of several descriptor matrices.
-pub fn stack(parts: &[&Descriptors]) -> Array2<f32> {
-    let views: Vec<ArrayView2<'_, f32>> = parts.iter().map(|d| d.view()).collect();
+/// Stack the descriptor rows of several images.
+pub fn stack(parts: &[&Features]) -> Array2<f32> {
+    let views: Vec<ArrayView2<'_, f32>> = parts.iter().map(|f| f.descriptors.view()).collect();
     if views.is_empty() {
         return Array2::zeros((0, 128));
     }
@@ -212,7 +218,7 @@ pub fn build_vocabulary(
         strict,
         "extracting",
     )?;
-    let parts: Vec<&Descriptors> = all.iter().flatten().collect();
+    let parts: Vec<&Features> = all.iter().flatten().collect();
     let data = stack(&parts);
     tracing::info!(
         descriptors = data.nrows(),
@@ -235,23 +241,24 @@ pub fn quantize_all(quantizer: &dyn Quantizer, descriptors: ArrayView2<'_, f32>)
 
 /// The words of each image's descriptors, exactly quantized (`None`, an
 /// unreadable image, gives no words).
-pub fn words_per_image(vocab: &Vocabulary, descriptors: &[Option<Descriptors>]) -> Vec<Vec<u32>> {
-    descriptors
+pub fn words_per_image(vocab: &Vocabulary, features: &[Option<Features>]) -> Vec<Vec<u32>> {
+    features
         .iter()
-        .map(|d| {
-            d.as_ref()
-                .map(|d| quantize_all(vocab.exact_quantizer(), d.view()))
+        .map(|f| {
+            f.as_ref()
+                .map(|f| quantize_all(vocab.exact_quantizer(), f.descriptors.view()))
                 .unwrap_or_default()
         })
         .collect()
 }
 
-/// Build a map from per-image descriptors (`None`: unreadable image, kept as
-/// an image without features so ids stay equal to list order).
+/// Build a map from per-image features (`None`: unreadable image, kept as
+/// an image without features so ids stay equal to list order). The map
+/// keeps each feature's word and keypoint for verification.
 pub fn index_descriptors(
     vocab: &Vocabulary,
     names: &[String],
-    descriptors: &[Option<Descriptors>],
+    features: &[Option<Features>],
     places: Option<&Places>,
     map_name: &str,
 ) -> MapIndex {
@@ -259,14 +266,17 @@ pub fn index_descriptors(
     let bar = progress_bar(names.len() as u64, "quantizing map");
     let images: Vec<ImageWords> = names
         .par_iter()
-        .zip(descriptors)
-        .map(|(name, d)| {
-            let words = d
-                .as_ref()
-                .map(|d| quantize_all(quantizer, d.view()))
-                .unwrap_or_default();
+        .zip(features)
+        .map(|(name, f)| {
+            let image = match f {
+                Some(f) => {
+                    let words = quantize_all(quantizer, f.descriptors.view());
+                    ImageWords::with_geometry(name.clone(), &words, &f.keypoints)
+                }
+                None => ImageWords::from_words(name.clone(), &[]),
+            };
             bar.inc(1);
-            ImageWords::from_words(name.clone(), &words)
+            image
         })
         .collect();
     bar.finish_and_clear();
@@ -285,7 +295,7 @@ pub fn build_map(
     map_name: &str,
     strict: bool,
 ) -> anyhow::Result<MapIndex> {
-    let descriptors = extract_all(
+    let features = extract_all(
         images,
         &vocab.meta().extract,
         DecodeLimits::default(),
@@ -304,11 +314,7 @@ pub fn build_map(
         }
     }
     Ok(index_descriptors(
-        vocab,
-        &names,
-        &descriptors,
-        places,
-        map_name,
+        vocab, &names, &features, places, map_name,
     ))
 }
 
@@ -324,6 +330,10 @@ pub struct Localizer {
     /// How queries are cut into tiles for streaming extraction
     /// ([`TileGrid::WHOLE`]: the whole image at once).
     pub tiles: TileGrid,
+    /// Geometric verification ([`Localizer::set_verify`]); off unless a front
+    /// end turns it on.
+    verify: VerifyParams,
+    fit: OpenCvFit,
 }
 
 impl Localizer {
@@ -331,6 +341,10 @@ impl Localizer {
     pub fn open(vocab: &Path, map: &Path, verify: bool) -> anyhow::Result<Self> {
         let vocab_file = Vocabulary::open(vocab, verify)?;
         let map = MapIndex::open_for(map, &vocab_file, verify)?;
+        let no_verify = VerifyParams {
+            enabled: false,
+            ..VerifyParams::default()
+        };
         Ok(Self {
             extract: vocab_file.meta().extract.clone(),
             vocab: vocab_file,
@@ -338,7 +352,53 @@ impl Localizer {
             limits: DecodeLimits::default(),
             quantizer: QuantizerKind::Exact,
             tiles: TileGrid::WHOLE,
+            fit: OpenCvFit::new(no_verify.fit()),
+            verify: no_verify,
         })
+    }
+
+    /// Verification settings; `params.enabled` is the default of
+    /// [`Localizer::localize`].
+    pub fn set_verify(&mut self, params: VerifyParams) {
+        self.fit = OpenCvFit::new(params.fit());
+        self.verify = params;
+    }
+
+    pub fn verify_params(&self) -> &VerifyParams {
+        &self.verify
+    }
+
+    /// The search options of a query that will be verified: enough vote
+    /// candidates for the top k, none dropped by a vote score (`min_score`
+    /// then applies to inliers).
+    pub fn options_for_verify(&self, options: &SearchOptions) -> SearchOptions {
+        SearchOptions {
+            top_n: options.top_n.max(self.verify.top_k),
+            min_score: 0.0,
+            ..options.clone()
+        }
+    }
+
+    /// Verify the vote candidates of `answer` (searched with
+    /// [`Localizer::options_for_verify`]`(options)`) against the query's
+    /// features the search used (`query`: word and keypoint), re-rank them
+    /// by inliers and keep `options.top_n` scoring at least `options.min_score`.
+    pub fn verify(
+        &self,
+        answer: Localization,
+        query: &[(u32, Keypoint)],
+        options: &SearchOptions,
+    ) -> Localization {
+        let started = Instant::now();
+        let votes: Vec<(u32, f32)> = answer.candidates.iter().map(|c| (c.id, c.score)).collect();
+        let reranked = rerank(&self.map, &votes, query, &self.fit, &self.verify);
+        answer.verified(
+            &self.map,
+            &reranked,
+            options.top_n,
+            options.min_score,
+            started.elapsed(),
+        )
     }
 
     /// Answer one query image given as encoded bytes: decode, then extract
@@ -350,16 +410,24 @@ impl Localizer {
         bytes: &[u8],
         options: &SearchOptions,
     ) -> Result<Localization, FeatureError> {
-        self.localize_tiled(bytes, options, self.tiles)
+        self.localize_tiled(bytes, options, self.tiles, self.verify.enabled)
     }
 
-    /// [`Localizer::localize`] with another tile grid than the configured one.
+    /// [`Localizer::localize`] with another tile grid than the configured
+    /// one, saying whether to verify.
     pub fn localize_tiled(
         &self,
         bytes: &[u8],
         options: &SearchOptions,
         grid: TileGrid,
+        verify: bool,
     ) -> Result<Localization, FeatureError> {
+        // a geometric stop verified its leader: its answer is verified too
+        let verify = verify || options.rule.info().geometric;
+        let (searched, options) = match verify {
+            true => (self.options_for_verify(options), options),
+            false => (options.clone(), options),
+        };
         let started = Instant::now();
         let image = features::decode(bytes, self.limits)?;
         let decoded = Instant::now();
@@ -372,16 +440,30 @@ impl Localizer {
         })?;
         let mut extract = decoded.elapsed();
         let quantizer = self.vocab.quantizer(self.quantizer);
-        let mut search = Search::new(&self.map, options);
+        let mut search = Search::new(&self.map, &searched);
+        let mut keypoints: Vec<Keypoint> = Vec::new();
         loop {
             let t = Instant::now();
             let Some(tile) = tiles.next_tile() else { break };
             let tile = tile?;
             extract += t.elapsed();
+            keypoints.extend_from_slice(&tile.keypoints);
             let quantize =
                 search::descriptor_quantizer(&*quantizer, tile.descriptors.view(), options.block);
             let last = tiles.extracted() == tiles.total();
-            if search.feed_tile(tile.len(), tiles.area_extracted(), last, quantize, None) {
+            let mut check = LeaderVerifier {
+                map: &self.map,
+                fit: &self.fit,
+                params: &self.verify,
+                keypoints: &keypoints,
+            };
+            if search.feed_tile(
+                tile.len(),
+                tiles.area_extracted(),
+                last,
+                quantize,
+                Some(&mut check),
+            ) {
                 break;
             }
         }
@@ -396,8 +478,9 @@ impl Localizer {
             decode: decoded - started,
             extract,
         };
+        let query = with_keypoints(search.voted(), &keypoints);
         let outcome = search.finish();
-        Ok(Localization::new(
+        let answer = Localization::new(
             &self.map,
             &options.rule,
             options.seed,
@@ -405,7 +488,12 @@ impl Localizer {
             outcome,
             edge,
             extraction,
-        ))
+        );
+        Ok(if verify {
+            self.verify(answer, &query, options)
+        } else {
+            answer
+        })
     }
 
     /// Read a file and answer it as a query.

@@ -43,6 +43,10 @@ pub struct Localization {
     /// Milliseconds per stage.
     pub timings_ms: Timings,
     pub map: MapIdentity,
+    /// With verification: whether the best candidate is verified (has at
+    /// least `min_inliers` inliers). Absent without verification.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub verified: Option<bool>,
 }
 
 /// One map image proposed as the query's place.
@@ -54,8 +58,22 @@ pub struct Candidate {
     /// Map image id (its line in the map's image list, from 0).
     pub id: u32,
     pub name: String,
-    /// Estimated full bag-of-words tf-idf score (comparable across queries).
+    /// Without verification: the estimated full bag-of-words tf-idf score.
+    /// With verification: the inlier count (0 for a candidate beyond the
+    /// verified top k). Either way comparable across queries.
     pub score: f32,
+    /// With verification, the vote score the candidate had (the score
+    /// without verification).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub votes: Option<f32>,
+    /// With verification, for the top k vote candidates: correspondences
+    /// agreeing with one geometric model.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub inliers: Option<u32>,
+    /// With verification, for the top k vote candidates: at least the
+    /// configured `min_inliers`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub verified: Option<bool>,
     /// Place label, when the map has one for this image.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub place: Option<String>,
@@ -146,6 +164,8 @@ pub struct Timings {
     pub extract: f64,
     pub quantize: f64,
     pub vote: f64,
+    /// Geometric verification (0 without).
+    pub verify: f64,
     pub total: f64,
 }
 
@@ -184,6 +204,9 @@ impl Candidate {
             id: info.id,
             name: info.name.to_owned(),
             score,
+            votes: None,
+            inliers: None,
+            verified: None,
             place: info.place.map(str::to_owned),
             pose: info
                 .pose
@@ -254,10 +277,47 @@ impl Localization {
                 extract: ms(edge.extract),
                 quantize: ms(t.quantize),
                 vote: ms(t.vote),
+                verify: 0.0,
                 total: ms(edge.decode + edge.extract + t.quantize + t.vote),
             },
             map: MapIdentity::of(map),
+            verified: None,
         }
+    }
+
+    /// Apply geometric verification: `reranked` holds the vote candidates of
+    /// this answer in their new order; keep the first `top_n` scoring at
+    /// least `min_score` (inliers), and count `elapsed` as verification time.
+    pub fn verified(
+        mut self,
+        map: &MapIndex,
+        reranked: &[crate::geometry::verify::Reranked],
+        top_n: usize,
+        min_score: f32,
+        elapsed: Duration,
+    ) -> Self {
+        self.candidates = reranked
+            .iter()
+            .filter(|r| r.score() >= min_score)
+            .take(top_n)
+            .enumerate()
+            .map(|(i, r)| {
+                let mut c = Candidate::new(i + 1, r.score(), map.image(r.id));
+                c.votes = Some(r.votes);
+                c.inliers = r.verification.map(|v| v.inliers as u32);
+                c.verified = r.verification.map(|v| v.verified);
+                c
+            })
+            .collect();
+        self.verified = Some(
+            self.candidates
+                .first()
+                .and_then(|c| c.verified)
+                .unwrap_or(false),
+        );
+        self.timings_ms.verify = ms(elapsed);
+        self.timings_ms.total += ms(elapsed);
+        self
     }
 }
 

@@ -1,6 +1,7 @@
 //! Argument groups shared by several subcommands.
 
 use bowloc::features::{ExtractConfig, SiftParams};
+use bowloc::geometry::verify::{Estimator, Model, VerifyParams};
 use bowloc::search::{RuleSpec, SearchOptions};
 use clap::Args;
 
@@ -93,5 +94,53 @@ impl SearchArgs {
             min_score: self.min_score,
             deadline: None,
         })
+    }
+}
+
+/// Geometric verification of the top vote candidates.
+#[derive(Args, Debug, Clone)]
+pub struct VerifyArgs {
+    /// Verify the top vote candidates geometrically and re-rank them by
+    /// inliers (the score becomes the inlier count).
+    #[arg(long)]
+    pub verify: bool,
+    /// Vote candidates verified.
+    #[arg(long, default_value_t = VerifyParams::default().top_k)]
+    pub verify_top_k: usize,
+    /// Inliers for a candidate to count as verified.
+    #[arg(long, default_value_t = VerifyParams::default().min_inliers)]
+    pub min_inliers: usize,
+    /// Skip words giving more (query, map) pairs than this between two images.
+    #[arg(long, default_value_t = VerifyParams::default().max_word_pairs)]
+    pub max_word_pairs: usize,
+    /// Geometric model: homography or fundamental.
+    #[arg(long, default_value = "homography")]
+    pub model: Model,
+    /// Robust estimator: ransac or magsac.
+    #[arg(long, default_value = "magsac")]
+    pub estimator: Estimator,
+    /// Inlier threshold in pixels of the extraction frame.
+    #[arg(long, default_value_t = VerifyParams::default().threshold_px)]
+    pub inlier_px: f64,
+    /// Iteration cap of the robust estimator.
+    #[arg(long, default_value_t = VerifyParams::default().max_iters)]
+    pub fit_iters: u32,
+}
+
+impl VerifyArgs {
+    pub fn params(&self) -> anyhow::Result<VerifyParams> {
+        let p = VerifyParams {
+            enabled: self.verify,
+            top_k: self.verify_top_k,
+            min_inliers: self.min_inliers,
+            max_word_pairs: self.max_word_pairs,
+            model: self.model,
+            estimator: self.estimator,
+            threshold_px: self.inlier_px,
+            max_iters: self.fit_iters,
+            ..VerifyParams::default()
+        };
+        p.validate().map_err(anyhow::Error::msg)?;
+        Ok(p)
     }
 }

@@ -1,7 +1,7 @@
 //! `bowloc eval`: reproduce the paper's evaluation on a dataset in the shared
 //! layout (tables, CSV, JSON and plots in `--out`).
 
-use super::args::ExtractArgs;
+use super::args::{ExtractArgs, VerifyArgs};
 use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig};
 use bowloc::features::TileGrid;
 use clap::Args;
@@ -57,6 +57,10 @@ pub struct EvalArgs {
     tiles: TileGrid,
     #[command(flatten)]
     extract: ExtractArgs,
+    /// With --verify: rows with and without geometric verification for the
+    /// full search and the --set settings.
+    #[command(flatten)]
+    verify: VerifyArgs,
 }
 
 pub fn run(a: EvalArgs) -> anyhow::Result<()> {
@@ -66,7 +70,9 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         .ok()
         .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
         .unwrap_or_else(|| "dataset".into());
+    let verify = a.verify.params()?;
     let config = EvalConfig {
+        verify: verify.enabled.then_some(verify),
         words: a.words,
         seed: a.seed,
         runs: a.runs,
@@ -106,6 +112,23 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
             100.0 * r.recall_at_1,
             100.0 * r.baseline_recall_at_1
         );
+    }
+    if let Some(v) = &report.verification {
+        for r in &v.rows {
+            println!(
+                "{}: recall@1 {:.1} % → {:.1} % with verification, recall@5 {:.1} % → {:.1} %, recall top-1 @90%P {:.1} % → {:.1} %, recall top-5 @90%P {:.1} % → {:.1} %, verification {:.2} ms per query (median)",
+                r.label,
+                100.0 * r.without.recall_at_1.mean,
+                100.0 * r.with.recall_at_1.mean,
+                100.0 * r.without.recall_at_5.mean,
+                100.0 * r.with.recall_at_5.mean,
+                100.0 * r.without.recall90_top1.mean,
+                100.0 * r.with.recall90_top1.mean,
+                100.0 * r.without.recall90_top5.mean,
+                100.0 * r.with.recall90_top5.mean,
+                r.verify_ms.median,
+            );
+        }
     }
     println!("{}", config.out.join("results.md").display());
     Ok(())

@@ -1,6 +1,6 @@
 //! `bowloc query`: localize image files and print the answers as JSON.
 
-use super::args::SearchArgs;
+use super::args::{SearchArgs, VerifyArgs};
 use bowloc::features::TileGrid;
 use bowloc::pipeline::Localizer;
 use clap::Args;
@@ -23,11 +23,14 @@ pub struct QueryArgs {
     /// image at once).
     #[arg(long, default_value = "2x2+24")]
     tiles: TileGrid,
+    #[command(flatten)]
+    verify: VerifyArgs,
 }
 
 pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     let mut localizer = Localizer::open(&a.vocab, &a.map, true)?;
     localizer.tiles = a.tiles;
+    localizer.set_verify(a.verify.params()?);
     let options = a.search.options()?;
     let mut answers = Vec::with_capacity(a.images.len());
     for path in &a.images {

@@ -3,17 +3,19 @@
 //! descriptors and the map built from them, so a second run (other rules,
 //! other runs) skips extraction, k-means and indexing.
 //!
-//! Descriptor files are store files (magic `BOWLOCDE`) with three sections:
+//! Descriptor files are store files (magic `BOWLOCDE`) with four sections:
 //! `meta` (JSON: the extraction settings, each image's name and file size,
 //! whether it was readable, and how long it took to decode and extract),
-//! `descriptors` (f32, all rows stacked, 128 wide) and `offsets` (u64, image i
-//! owns rows `offsets[i]..offsets[i + 1]`). A file made with other settings or
+//! `descriptors` (f32, all rows stacked, 128 wide), `keypoints` (f32, the
+//! keypoint of each row: x, y, size, angle, response) and `offsets` (u64,
+//! image i owns rows `offsets[i]..offsets[i + 1]`). A file made with other settings or
 //! other images is rebuilt, not reused. Vocabulary and map file names carry
 //! the checksum of the descriptors they come from, so they cannot go stale.
 
 use super::tiles::{Query, Tile};
 use crate::dataset::ImageRef;
-use crate::features::{DecodeLimits, Descriptors, ExtractConfig, TileGrid};
+use crate::features::{DecodeLimits, ExtractConfig, Features, TileGrid};
+use crate::geometry::Keypoint;
 use crate::index::MapIndex;
 use crate::pipeline::{extract_all_timed, index_descriptors, train_vocabulary};
 use crate::store::{Store, StoreWriter};
@@ -25,9 +27,12 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 const MAGIC: [u8; 8] = *b"BOWLOCDE";
-const VERSION: u32 = 2;
+/// 2: keypoints beside the descriptors; 3: tiles and their times.
+const VERSION: u32 = 3;
 /// Descriptor width (SIFT).
 const DIM: usize = 128;
+/// Values per keypoint row: x, y, size, angle, response.
+const KEYPOINT_WIDTH: usize = 5;
 
 /// An input image as the cache knows it: a changed name or size invalidates.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -102,10 +107,35 @@ impl DescriptorSet {
         )
     }
 
+    /// The keypoints of image `i`, one per descriptor row (empty when the
+    /// image could not be read).
+    pub fn keypoints(&self, i: usize) -> Vec<Keypoint> {
+        if !self.meta.readable[i] {
+            return Vec::new();
+        }
+        let o = self.offsets();
+        let all = self.store.f32s("keypoints").expect("validated on open");
+        all[o[i] as usize * KEYPOINT_WIDTH..o[i + 1] as usize * KEYPOINT_WIDTH]
+            .chunks_exact(KEYPOINT_WIDTH)
+            .map(|k| Keypoint {
+                x: k[0],
+                y: k[1],
+                size: k[2],
+                angle: k[3],
+                response: k[4],
+            })
+            .collect()
+    }
+
     /// Per-image copies, in the form the map builder takes.
-    pub fn owned_per_image(&self) -> Vec<Option<Descriptors>> {
+    pub fn owned_per_image(&self) -> Vec<Option<Features>> {
         (0..self.len())
-            .map(|i| self.image(i).map(|d| d.to_owned()))
+            .map(|i| {
+                self.image(i).map(|d| Features {
+                    keypoints: self.keypoints(i),
+                    descriptors: d.to_owned(),
+                })
+            })
             .collect()
     }
 
@@ -115,15 +145,17 @@ impl DescriptorSet {
     }
 
     /// Image `i` as the sweep replays it, given its words (rows in order):
-    /// its tiles, and decoding plus what extraction spends outside the tiles
-    /// (downscaling) as the fixed cost.
+    /// its keypoints, its tiles, and decoding plus what extraction spends
+    /// outside the tiles (downscaling) as the fixed cost.
     pub fn query(&self, i: usize, words: Vec<u32>) -> Query {
         let tiles = self.meta.tiles.get(i).cloned().unwrap_or_default();
         let in_tiles: f64 = tiles.iter().map(|t| t.ms as f64).sum();
         Query {
             words,
+            keypoints: self.keypoints(i),
             fixed_ms: (self.extract_ms(i) - in_tiles).max(0.0) as f32,
             tiles,
+            geometry: None,
         }
     }
 
@@ -163,6 +195,7 @@ fn open(path: &Path) -> anyhow::Result<DescriptorSet> {
         && offsets.last() == Some(&(rows as u64))
         && offsets.windows(2).all(|w| w[0] <= w[1])
         && store.f32s("descriptors")?.len() % DIM == 0
+        && store.f32s("keypoints")?.len() == rows * KEYPOINT_WIDTH
         && [
             meta.readable.len(),
             meta.decode_ms.len(),
@@ -210,6 +243,7 @@ pub fn descriptors(
     }
     let extracted = extract_all_timed(images, config, grid, DecodeLimits::default(), false, what)?;
     let mut data: Vec<f32> = Vec::new();
+    let mut keypoints: Vec<f32> = Vec::new();
     let mut offsets = vec![0u64];
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     let mut meta = DescriptorMeta {
@@ -224,10 +258,16 @@ pub fn descriptors(
     for e in &extracted {
         if let Some(e) = e {
             anyhow::ensure!(
-                e.descriptors.ncols() == DIM,
+                e.features.descriptors.ncols() == DIM,
                 "descriptors are not {DIM} wide"
             );
-            data.extend(e.descriptors.iter());
+            data.extend(e.features.descriptors.iter());
+            keypoints.extend(
+                e.features
+                    .keypoints
+                    .iter()
+                    .flat_map(|k| [k.x, k.y, k.size, k.angle, k.response]),
+            );
         }
         offsets.push((data.len() / DIM) as u64);
         meta.readable.push(e.is_some());
@@ -249,6 +289,7 @@ pub fn descriptors(
     StoreWriter::new(MAGIC, VERSION)
         .json("meta", &meta)
         .f32s("descriptors", &data)
+        .f32s("keypoints", &keypoints)
         .u64s("offsets", &offsets)
         .write_atomic(path)?;
     tracing::info!(path = %path.display(), rows = offsets.last(), "descriptors cached");
@@ -362,6 +403,7 @@ mod tests {
         StoreWriter::new(MAGIC, VERSION)
             .json("meta", &meta)
             .f32s("descriptors", &data)
+            .f32s("keypoints", &[0.5; 3 * KEYPOINT_WIDTH])
             .u64s("offsets", &[0, 1, 3])
             .write_atomic(&path)
             .unwrap();
@@ -378,11 +420,14 @@ mod tests {
             (1, 5.5, 6.0)
         );
         assert_eq!(set.owned_per_image().len(), 2);
+        assert_eq!(set.keypoints(1).len(), 2);
+        assert_eq!(set.keypoints(0)[0].size, 0.5);
 
         // Offsets that do not cover the rows are refused.
         StoreWriter::new(MAGIC, VERSION)
             .json("meta", &meta)
             .f32s("descriptors", &data)
+            .f32s("keypoints", &[0.5; 3 * KEYPOINT_WIDTH])
             .u64s("offsets", &[0, 1, 2])
             .write_atomic(&path)
             .unwrap();
@@ -418,6 +463,7 @@ mod tests {
             StoreWriter::new(MAGIC, VERSION)
                 .json("meta", meta)
                 .f32s("descriptors", &data)
+                .f32s("keypoints", &[0.5; KEYPOINT_WIDTH])
                 .u64s("offsets", &[0, 1])
                 .write_atomic(&path)
                 .unwrap();

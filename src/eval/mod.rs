@@ -10,7 +10,9 @@
 //! 3. [`sweep`]: calibrate the grids, then vote every setting × run × query;
 //! 4. [`summary`] (with the definitions in [`metrics`]), [`recommend`] and
 //!    [`equal_recall`];
-//! 5. [`table`] and [`plots`]: the outputs.
+//! 5. [`verify`] (when asked): the full search and the explicit settings
+//!    re-ranked by geometric verification, with and without side by side;
+//! 6. [`table`] and [`plots`]: the outputs.
 
 pub mod cache;
 pub mod equal_recall;
@@ -22,6 +24,7 @@ pub mod sweep;
 pub mod table;
 pub mod tiles;
 pub mod timing;
+pub mod verify;
 
 use crate::dataset::Dataset;
 use crate::features::{ExtractConfig, TileGrid};
@@ -85,6 +88,8 @@ pub struct EvalConfig {
     pub plots: bool,
     /// The command line, recorded in the outputs.
     pub command: String,
+    /// Also verify the full search and the explicit settings geometrically.
+    pub verify: Option<crate::geometry::verify::VerifyParams>,
 }
 
 /// The dataset as evaluated.
@@ -131,6 +136,8 @@ pub struct Stages {
     pub quantize_s: f64,
     pub calibrate_s: f64,
     pub sweep_s: f64,
+    /// The verification pass (0 without).
+    pub verify_s: f64,
     pub total_s: f64,
 }
 
@@ -167,6 +174,8 @@ pub struct Report {
     /// The full search on the queries extracted whole (when they are tiled):
     /// its time share is against the tiled full search.
     pub whole_image: Option<SettingSummary>,
+    /// The verification pass, when asked for.
+    pub verification: Option<verify::VerificationReport>,
 }
 
 /// The grids of the rules asked for, the full search first.
@@ -306,8 +315,20 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     let map = cache::map_index(&config.cache, &vocab, &map_desc, &dataset.name)?;
     stages.map_s = seconds_since(&mut clock);
 
+    // one OpenCV thread per query: the sweep already runs one query per core
+    crate::features::set_opencv_threads(1);
     let quantizer = vocab.exact_quantizer();
-    let (queries, costs) = quantize_queries(&query_desc, &quantizer, "quantizing queries");
+    let (mut queries, costs) = quantize_queries(&query_desc, &quantizer, "quantizing queries");
+    // Geometric verification as the service does it: for the `verified`
+    // stop always, for re-ranking in the `+verify` settings.
+    let verify_params = config.verify.clone().unwrap_or_default();
+    let geometry = std::sync::Arc::new(tiles::Geometry {
+        fit: Box::new(crate::features::fit::OpenCvFit::new(verify_params.fit())),
+        params: verify_params.clone(),
+    });
+    for q in &mut queries {
+        q.geometry = Some(geometry.clone());
+    }
     let whole = whole_desc
         .as_ref()
         .map(|d| quantize_queries(d, &quantizer, "quantizing whole queries"));
@@ -341,6 +362,19 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
                 settings.len() - 1
             });
         explicit.push(index);
+    }
+    // With verification: the full search and each explicit setting again,
+    // re-ranked by geometric verification.
+    let mut verified_pairs = Vec::new();
+    if config.verify.is_some() {
+        let mut indices = vec![0];
+        indices.extend(explicit.iter().copied().filter(|&i| i != 0));
+        for i in indices {
+            let mut s = settings[i].clone();
+            s.verify = true;
+            settings.push(s);
+            verified_pairs.push((i, settings.len() - 1));
+        }
     }
     stages.calibrate_s = seconds_since(&mut clock);
     tracing::info!(
@@ -400,6 +434,26 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         }
     });
 
+    let verification = config
+        .verify
+        .as_ref()
+        .map(|params| verify::VerificationReport {
+            params: params.clone(),
+            rows: verified_pairs
+                .iter()
+                .map(|&(without, with)| {
+                    verify::row(
+                        &summaries[without].label,
+                        without,
+                        &outcomes[without],
+                        &outcomes[with],
+                        &dataset.truth,
+                    )
+                })
+                .collect(),
+        });
+    stages.verify_s = seconds_since(&mut clock);
+
     let mean_features = metrics::mean(
         &queries
             .iter()
@@ -442,6 +496,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         equal_recall,
         histogram,
         whole_image,
+        verification,
     };
     write_outputs(&report, &config.out, config.plots)?;
     Ok(report)

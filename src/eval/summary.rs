@@ -59,6 +59,7 @@ pub fn stage_sample(o: &Outcome, c: &QueryCost) -> StageSample {
         extract: o.extract_ms as f64,
         quantize: c.quantize_ms_per_feature * o.used as f64,
         vote: o.vote_ms as f64,
+        verify: o.verify_ms as f64,
     }
 }
 
@@ -145,6 +146,7 @@ impl SettingSummary {
             rule: crate::search::RuleSpec::new(rule, parameter).expect("a valid rule"),
             min_features,
             target: None,
+            verify: false,
         };
         let stat = |mean| Stat { mean, std: 0.0 };
         Self {
@@ -239,7 +241,9 @@ mod tests {
             total: 100,
             vote_ms: 1.0,
             extract_ms: 10.0,
+            verify_ms: 0.0,
             tiles: 1,
+            verified: false,
         }
     }
 
@@ -257,6 +261,7 @@ mod tests {
             rule: RuleSpec::new("none", None).unwrap(),
             min_features: 0,
             target: None,
+            verify: false,
         };
         let costs = [QueryCost {
             quantize_ms_per_feature: 0.1,

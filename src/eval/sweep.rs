@@ -5,7 +5,7 @@
 
 use super::tiles::Query;
 use crate::index::MapIndex;
-use crate::search::{Ranked, RuleSpec, SearchOptions, SearchOutcome, search_words};
+use crate::search::{Ranked, RuleSpec, SearchOptions, search_words};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -82,6 +82,10 @@ pub const RULE_GRIDS: &[RuleGrid] = &[
         rule: "confident",
         grid: Grid::Values(&[0.1, 0.05, 0.01]),
     },
+    RuleGrid {
+        rule: "verified",
+        grid: Grid::Values(&[8.0, 12.0, 16.0, 24.0]),
+    },
 ];
 
 /// Range searched when calibrating a rule's parameter: the calibrated grid's
@@ -109,6 +113,8 @@ pub struct Setting {
     pub min_features: usize,
     /// The fraction of features its parameter was calibrated for, if any.
     pub target: Option<f64>,
+    /// Candidates re-ranked by geometric verification.
+    pub verify: bool,
 }
 
 impl Setting {
@@ -125,6 +131,9 @@ impl Setting {
         }
         if self.min_features > 0 {
             s += &format!(" w={}", self.min_features);
+        }
+        if self.verify {
+            s += " +verify";
         }
         s
     }
@@ -164,8 +173,10 @@ pub fn parse_setting(spec: &str, warmup: usize) -> anyhow::Result<Setting> {
         ),
         None => (body.trim(), None),
     };
+    let rule = RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?;
     Ok(Setting {
-        rule: RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?,
+        verify: rule.info().geometric,
+        rule,
         min_features,
         target: None,
     })
@@ -206,8 +217,12 @@ pub struct Outcome {
     pub vote_ms: f32,
     /// Decoding and extracting the tiles extracted, in milliseconds.
     pub extract_ms: f32,
+    /// Verifying the candidates after the search, in milliseconds.
+    pub verify_ms: f32,
     /// Tiles extracted (1 for a query extracted whole).
     pub tiles: u16,
+    /// The best candidate is geometrically verified.
+    pub verified: bool,
 }
 
 impl Outcome {
@@ -230,7 +245,16 @@ pub fn search_one(
     top_n: usize,
 ) -> Outcome {
     let o = search_words(map, words, &setting.options(seed, top_n));
-    outcome(o, words.len(), 0.0, 1)
+    Outcome {
+        candidates: o.candidates,
+        used: o.features_used as u32,
+        total: words.len() as u32,
+        vote_ms: o.timings.vote.as_secs_f32() * 1e3,
+        extract_ms: 0.0,
+        verify_ms: 0.0,
+        tiles: 1,
+        verified: false,
+    }
 }
 
 /// One search of a cached query, its tiles streamed as the service would.
@@ -241,19 +265,16 @@ pub fn search_query(
     seed: u64,
     top_n: usize,
 ) -> Outcome {
-    let (o, tiles, extract_ms) = query.search(map, &setting.options(seed, top_n));
-    outcome(o, query.words.len(), extract_ms, tiles)
-}
-
-/// `total`: the query's features, extracted or not.
-fn outcome(o: SearchOutcome, total: usize, extract_ms: f64, tiles: usize) -> Outcome {
+    let r = query.search(map, &setting.options(seed, top_n), setting.verify);
     Outcome {
-        candidates: o.candidates,
-        used: o.features_used as u32,
-        total: total as u32,
-        vote_ms: o.timings.vote.as_secs_f32() * 1e3,
-        extract_ms: extract_ms as f32,
-        tiles: tiles as u16,
+        candidates: r.outcome.candidates,
+        used: r.outcome.features_used as u32,
+        total: query.words.len() as u32,
+        vote_ms: r.outcome.timings.vote.as_secs_f32() * 1e3,
+        extract_ms: r.extract_ms as f32,
+        verify_ms: r.verify_ms as f32,
+        tiles: r.tiles as u16,
+        verified: r.verified,
     }
 }
 
@@ -370,6 +391,7 @@ pub fn calibrate(
             rule: RuleSpec::new(rule, Some(p)).map_err(anyhow::Error::msg)?,
             min_features,
             target: None,
+            verify: false,
         })
     };
     setting(lo)?;
@@ -416,15 +438,21 @@ pub fn plan(
     let spec = |name: &str, p: Option<f64>| RuleSpec::new(name, p).map_err(anyhow::Error::msg);
     for g in grids {
         match g.grid {
-            Grid::Single => settings.push(Setting {
-                rule: spec(g.rule, None)?,
-                min_features: first,
-                target: None,
-            }),
+            Grid::Single => {
+                let rule = spec(g.rule, None)?;
+                settings.push(Setting {
+                    verify: rule.info().geometric,
+                    rule,
+                    min_features: first,
+                    target: None,
+                })
+            }
             Grid::Values(values) => {
                 for &v in values {
+                    let rule = spec(g.rule, Some(v))?;
                     settings.push(Setting {
-                        rule: spec(g.rule, Some(v))?,
+                        verify: rule.info().geometric,
+                        rule,
                         min_features: first,
                         target: None,
                     });
@@ -443,6 +471,7 @@ pub fn plan(
                             rule: spec(g.rule, Some(c.parameter))?,
                             min_features: w,
                             target: Some(c.target),
+                            verify: false,
                         });
                     }
                     calibrations.extend(found);
@@ -579,11 +608,13 @@ mod tests {
                 rule: RuleSpec::new("none", None).unwrap(),
                 min_features: 0,
                 target: None,
+                verify: false,
             },
             Setting {
                 rule: RuleSpec::new("fixed", Some(0.5)).unwrap(),
                 min_features: 0,
                 target: None,
+                verify: false,
             },
         ];
         let bar = ProgressBar::hidden();

@@ -180,6 +180,9 @@ pub fn markdown(report: &Report) -> String {
             pct(h.p95),
         );
     }
+    if let Some(v) = &report.verification {
+        let _ = writeln!(s, "{}", super::verify::markdown(v));
+    }
     s
 }
 

@@ -5,6 +5,7 @@
 mod config;
 mod decode;
 mod extract;
+pub mod fit;
 mod tiles;
 
 pub use config::{ExtractConfig, SiftParams};

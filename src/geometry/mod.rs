@@ -1,7 +1,13 @@
 //! Image geometry as plain numbers: where a feature sits in its image. The
 //! extraction edge fills these from OpenCV's keypoints; the map stores them
-//! per image feature, and verification matches them between a query and a
-//! candidate. No OpenCV types here.
+//! per image feature ([`packed`]), and verification matches them between a
+//! query and a candidate ([`matches`], [`verify`]). No OpenCV types here: the
+//! robust model fit is the trait [`verify::ModelFit`], implemented in
+//! `features::fit`.
+
+pub mod matches;
+pub mod packed;
+pub mod verify;
 
 /// A feature's keypoint in the extraction frame (the downscaled image the
 /// descriptors were computed on): centre, size and orientation.

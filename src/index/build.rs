@@ -1,6 +1,9 @@
-//! Building a map: per-image word counts → tf-idf weights → CSR postings.
+//! Building a map: per-image word counts → tf-idf weights → CSR postings,
+//! plus each image's packed features (word and keypoint) for verification.
 
 use super::{MapArrays, MapIndex, MapMeta, Places, StringTable};
+use crate::geometry::Keypoint;
+use crate::geometry::packed::{PackedFeature, pack_image};
 use rayon::prelude::*;
 
 /// One map image as the words its features quantized to.
@@ -11,6 +14,9 @@ pub struct ImageWords {
     pub counts: Vec<(u32, u32)>,
     /// Number of features (sum of counts).
     pub features: u32,
+    /// Each feature's word and keypoint, sorted by word (empty: the image
+    /// has no stored geometry).
+    pub geometry: Vec<PackedFeature>,
 }
 
 impl ImageWords {
@@ -28,6 +34,17 @@ impl ImageWords {
             name: name.into(),
             counts,
             features: words.len() as u32,
+            geometry: Vec::new(),
+        }
+    }
+
+    /// Words and the keypoints they came from (`keypoints[i]` is the
+    /// feature of `words[i]`), so the map can verify geometry.
+    pub fn with_geometry(name: impl Into<String>, words: &[u32], keypoints: &[Keypoint]) -> Self {
+        debug_assert_eq!(words.len(), keypoints.len());
+        Self {
+            geometry: pack_image(words, keypoints),
+            ..Self::from_words(name, words)
         }
     }
 }
@@ -111,6 +128,14 @@ impl MapBuilder {
             })
             .collect();
 
+        let mut geometry_offsets = Vec::with_capacity(n_images + 1);
+        geometry_offsets.push(0u64);
+        let mut geometry = Vec::new();
+        for image in &self.images {
+            geometry.extend_from_slice(&image.geometry);
+            geometry_offsets.push(geometry.len() as u64);
+        }
+
         let pose_fields = places.map(|p| p.pose_fields.clone()).unwrap_or_default();
         let mut place_labels = Vec::with_capacity(n_images);
         let mut poses = Vec::with_capacity(n_images * pose_fields.len());
@@ -145,6 +170,8 @@ impl MapBuilder {
             names: StringTable::from_strings(self.images.iter().map(|i| i.name.as_str())),
             places: StringTable::from_strings(place_labels),
             poses,
+            geometry_offsets,
+            geometry,
         };
         MapIndex::from_arrays(arrays, meta)
     }

@@ -8,7 +8,8 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 const MAGIC: [u8; 8] = *b"BOWLOCMA";
-const VERSION: u32 = 1;
+/// 2: per-image geometry (`geometry.offsets`, `geometry.features`).
+const VERSION: u32 = 2;
 
 /// What a map is.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -42,6 +43,8 @@ pub(super) fn save(map: &MapIndex, path: &Path) -> Result<(), StoreError> {
         .u64s("places.offsets", v.places.offsets)
         .bytes("places.bytes", v.places.bytes)
         .f64s("poses", v.poses)
+        .u64s("geometry.offsets", v.geometry_offsets)
+        .u32s("geometry.features", bytemuck::cast_slice(v.geometry))
         .write_atomic(path)?;
     Ok(())
 }
@@ -64,11 +67,26 @@ pub(super) fn view(store: &Store) -> Result<MapView<'_>, StoreError> {
             bytes: store.bytes("places.bytes")?,
         },
         poses: store.f64s("poses")?,
+        geometry_offsets: store.u64s("geometry.offsets")?,
+        geometry: bytemuck::try_cast_slice(store.u32s("geometry.features")?)
+            .map_err(|_| store.invalid("geometry.features is not whole features"))?,
     })
 }
 
 pub(super) fn open(path: &Path, verify: bool) -> Result<MapIndex, StoreError> {
-    let store = Store::open(path, MAGIC, "map", VERSION, verify)?;
+    let store = match Store::open(path, MAGIC, "map", VERSION, verify) {
+        Err(StoreError::WrongVersion { found, .. }) if found < VERSION => {
+            return Err(StoreError::Invalid {
+                path: path.to_path_buf(),
+                detail: format!(
+                    "map format version {found} is older than this build's version {VERSION} \
+                     (which adds the geometry that verification needs); rebuild the map with \
+                     `bowloc map build --vocab VOCAB --images IMAGES --out MAP`"
+                ),
+            });
+        }
+        other => other?,
+    };
     let meta: MapMeta = store.json("meta")?;
     {
         let v = view(&store)?;
@@ -100,6 +118,14 @@ pub(super) fn open(path: &Path, verify: bool) -> Result<MapIndex, StoreError> {
                 meta.images
             ));
         }
+        let g = v.geometry_offsets;
+        if g.len() != meta.images + 1
+            || g.first().copied() != Some(0)
+            || g.last().copied() != Some(v.geometry.len() as u64)
+            || g.windows(2).any(|w| w[0] > w[1])
+        {
+            return bad("geometry offsets disagree with the features stored".into());
+        }
         v.names
             .validate()
             .map_err(|e| store.invalid(format!("names: {e}")))?;
@@ -111,4 +137,57 @@ pub(super) fn open(path: &Path, verify: bool) -> Result<MapIndex, StoreError> {
         backing: Backing::Mapped(store),
         meta,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Keypoint;
+    use crate::index::{ImageWords, MapBuilder};
+
+    fn kp(x: f32, y: f32) -> Keypoint {
+        Keypoint {
+            x,
+            y,
+            size: 3.0,
+            angle: 45.0,
+            response: 0.1,
+        }
+    }
+
+    #[test]
+    fn geometry_survives_save_and_open() {
+        let mut b = MapBuilder::new(4);
+        b.add(ImageWords::with_geometry(
+            "a",
+            &[3, 1, 1],
+            &[kp(1.0, 2.0), kp(3.0, 4.0), kp(5.0, 6.0)],
+        ));
+        b.add(ImageWords::from_words("no features", &[]));
+        b.add(ImageWords::with_geometry("c", &[2], &[kp(7.0, 8.0)]));
+        let built = b.build("t", "0", None);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.bowmap");
+        built.save(&path).unwrap();
+        let map = MapIndex::open(&path, true).unwrap();
+        let a = map.geometry(0);
+        assert_eq!(a.iter().map(|f| f.word).collect::<Vec<_>>(), vec![1, 1, 3]);
+        assert_eq!(a[2].point(), [1.0, 2.0]);
+        assert!(map.geometry(1).is_empty());
+        assert_eq!(map.geometry(2)[0].point(), [7.0, 8.0]);
+        assert!(map.geometry(99).is_empty());
+    }
+
+    #[test]
+    fn an_older_map_is_refused_with_how_to_rebuild_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("old.bowmap");
+        StoreWriter::new(MAGIC, 1)
+            .json("meta", &MapMeta::default())
+            .write_atomic(&path)
+            .unwrap();
+        let e = MapIndex::open(&path, true).err().unwrap().to_string();
+        assert!(e.contains("bowloc map build"), "{e}");
+        assert!(e.contains("version 1"), "{e}");
+    }
 }

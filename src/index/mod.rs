@@ -4,7 +4,8 @@
 //! tf_j(w) = count_j(w)/n_j, idf(w) = ln(N_map/df(w)), d_j = tf_j·idf and
 //! d̂_j = d_j/‖d_j‖. The postings of word w list (j, d̂_j(w)) for every image
 //! holding w, in a flat CSR layout. Per-image metadata (name, place label,
-//! pose) rides along. Built by [`build`], stored and memory-mapped by `file`.
+//! pose) rides along, and so does each image's geometry: every feature's word
+//! and keypoint, packed ([`crate::geometry::packed`]), for verification. Built by [`build`], stored and memory-mapped by `file`.
 
 pub mod build;
 mod file;
@@ -17,6 +18,7 @@ pub use file::MapMeta;
 pub use metadata::{ImageInfo, Places, StringTable};
 pub use postings::Postings;
 
+use crate::geometry::packed::PackedFeature;
 use crate::store::{Store, StoreError};
 
 /// A map, memory-mapped from a file or held in memory.
@@ -38,6 +40,9 @@ pub struct MapArrays {
     pub places: StringTable,
     /// `images × pose_fields.len()`, NaN where unknown.
     pub poses: Vec<f64>,
+    /// Image j's features are `geometry[geometry_offsets[j]..geometry_offsets[j + 1]]`.
+    pub geometry_offsets: Vec<u64>,
+    pub geometry: Vec<PackedFeature>,
 }
 
 enum Backing {
@@ -54,6 +59,8 @@ pub struct MapView<'a> {
     pub names: metadata::StrTable<'a>,
     pub places: metadata::StrTable<'a>,
     pub poses: &'a [f64],
+    pub geometry_offsets: &'a [u64],
+    pub geometry: &'a [PackedFeature],
 }
 
 impl MapIndex {
@@ -88,6 +95,8 @@ impl MapIndex {
                 names: a.names.as_view(),
                 places: a.places.as_view(),
                 poses: &a.poses,
+                geometry_offsets: &a.geometry_offsets,
+                geometry: &a.geometry,
             },
             Backing::Mapped(store) => file::view(store).expect("validated on load"),
         }
@@ -97,6 +106,17 @@ impl MapIndex {
     pub fn image(&self, id: u32) -> ImageInfo<'_> {
         let view = self.view();
         metadata::image_info(&view, &self.meta.pose_fields, id)
+    }
+
+    /// The stored features of map image `id`, sorted by word (empty for an
+    /// image without features or an unknown id).
+    pub fn geometry(&self, id: u32) -> &[PackedFeature] {
+        let v = self.view();
+        let j = id as usize;
+        match (v.geometry_offsets.get(j), v.geometry_offsets.get(j + 1)) {
+            (Some(&a), Some(&b)) => &v.geometry[a as usize..b as usize],
+            _ => &[],
+        }
     }
 
     /// Each image's words, recovered from the postings: d̂_j(w) ∝ count_j(w)·idf(w),

@@ -330,12 +330,14 @@ pub fn descriptor_quantizer<'q>(
 /// Stream an image's tiles through a search, tiles given as their features'
 /// words in extraction order with the image share each one covers: what
 /// the service does with real tiles, on words known in advance (used by
-/// evaluation). Returns the outcome and the tiles extracted.
+/// evaluation). Returns the outcome, the (feature number, word) pairs voted
+/// and the tiles extracted.
 pub fn search_tiles(
     map: &MapIndex,
     tiles: &[(&[u32], f64)],
     options: &SearchOptions,
-) -> (SearchOutcome, usize) {
+    mut leader_check: Option<&mut dyn LeaderCheck>,
+) -> (SearchOutcome, Vec<(u32, u32)>, usize) {
     let mut s = Search::new(map, options);
     let mut share = 0.0;
     let mut used = 0;
@@ -348,11 +350,15 @@ pub fn search_tiles(
                 *o = words[i as usize];
             }
         };
-        if s.feed_tile(words.len(), share, last, quantize, None) {
+        let check = leader_check
+            .as_mut()
+            .map(|c| &mut **c as &mut dyn LeaderCheck);
+        if s.feed_tile(words.len(), share, last, quantize, check) {
             break;
         }
     }
-    (s.finish(), used)
+    let voted = s.voted.clone();
+    (s.finish(), voted, used)
 }
 
 /// Search over words already known: feature i quantizes to `words[i]`. Gives

@@ -91,6 +91,7 @@ pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
         max_pixels: config.limits.pixels,
     };
     localizer.quantizer = config.quantizer().map_err(anyhow::Error::msg)?;
+    localizer.set_verify(config.verify.clone());
     if let QuantizerKind::Tree { .. } = localizer.quantizer {
         // build the tree now, not in the first request
         progress.begin("building the quantization tree");

@@ -4,6 +4,7 @@
 //! before start-up goes on. Command-line flags are applied by the caller with
 //! [`Config::apply`].
 
+use crate::geometry::verify::VerifyParams;
 use crate::quantize::QuantizerKind;
 use crate::search::{RuleSpec, SearchOptions};
 use figment::Figment;
@@ -26,6 +27,8 @@ pub struct Config {
     pub search: SearchDefaults,
     pub limits: Limits,
     pub bootstrap: BootstrapConfig,
+    /// Geometric verification of the top vote candidates.
+    pub verify: VerifyParams,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -412,6 +415,9 @@ impl Config {
                 ),
             );
         }
+        if let Err(e) = self.verify.validate() {
+            return bad("verify", e);
+        }
         if self.bootstrap.enabled && self.bootstrap.words < 2 {
             return bad("bootstrap.words", "must be at least 2".into());
         }
@@ -569,6 +575,9 @@ mod tests {
                 "takes no parameter",
             ),
             ("[search]\nquantizer = \"fast\"\n", "search.quantizer"),
+            ("[verify]\ntop_k = 0\n", "top_k"),
+            ("[verify]\nmodel = \"affine\"\n", "model"),
+            ("[verify]\nconfidence = 1.5\n", "confidence"),
             (
                 "[search]\nquantizer = \"tree\"\ntree_probes = 0\n",
                 "tree_probes",

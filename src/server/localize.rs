@@ -61,6 +61,11 @@ pub struct LocalizeParams {
     /// (`1x1`: extract the whole image first). Default: the configured grid.
     #[param(value_type = Option<String>, example = "2x2+24")]
     pub tiles: Option<String>,
+    /// Verify the top vote candidates geometrically and re-rank them by
+    /// inliers (`true` or `false`; default from the `[verify]` section).
+    /// With verification the score is the inlier count.
+    #[param(value_type = Option<bool>)]
+    pub verify: Option<String>,
 }
 
 /// What a request may ask for within the configuration.
@@ -133,6 +138,19 @@ impl LocalizeParams {
                 .trim()
                 .parse()
                 .map_err(|e: String| ApiError::invalid_parameter("tiles", e)),
+        }
+    }
+
+    /// Whether to verify, on top of the configured default.
+    pub fn verify(&self, default: bool) -> Result<bool, ApiError> {
+        match self.verify.as_deref().map(str::trim) {
+            None => Ok(default),
+            Some("true") => Ok(true),
+            Some("false") => Ok(false),
+            Some(v) => Err(ApiError::invalid_parameter(
+                "verify",
+                format!("`{v}` is not `true` or `false`"),
+            )),
         }
     }
 
@@ -418,6 +436,7 @@ pub async fn localize(
     let params = LocalizeParams::from_query(query.as_deref())?;
     let mut options = params.options(&state.defaults)?;
     let tiles = params.tiles(localizer.tiles)?;
+    let verify = params.verify(state.config.verify.enabled)?;
     options.deadline = Some(deadline);
     // A body still arriving at the deadline is not waited for.
     let image = tokio::time::timeout_at(deadline.into(), read_image(&state, request))
@@ -431,7 +450,7 @@ pub async fn localize(
             if Instant::now() >= deadline {
                 return Err(ApiError::deadline_exceeded()); // no work for a lost cause
             }
-            Ok(localizer.localize_tiled(&image, &options, tiles)?)
+            Ok(localizer.localize_tiled(&image, &options, tiles, verify)?)
         })
         .await
         .map_err(|e| match e {
@@ -586,6 +605,16 @@ mod tests {
             assert_eq!(c, expected_code, "{q}: {m}");
             assert!(m.contains(mentions), "{q}: {m}");
         }
+    }
+
+    #[test]
+    fn verify_defaults_to_the_configuration() {
+        let p = |q: &str| LocalizeParams::from_query(Some(q)).unwrap();
+        assert!(p("").verify(true).unwrap());
+        assert!(!p("").verify(false).unwrap());
+        assert!(p("verify=true").verify(false).unwrap());
+        assert!(!p("verify=false").verify(true).unwrap());
+        assert_eq!(p("verify=1").verify(true).unwrap_err().status, 400);
     }
 
     #[test]

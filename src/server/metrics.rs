@@ -28,6 +28,9 @@ pub const STAGE_DURATION: &str = "bowloc_localize_stage_duration_seconds";
 pub const RATIO_USED: &str = "bowloc_localize_features_used_ratio";
 pub const QUERY_FEATURES: &str = "bowloc_localize_query_features";
 pub const STOPS: &str = "bowloc_localize_stops_total";
+pub const VERIFY_DURATION: &str = "bowloc_verify_duration_seconds";
+pub const VERIFY_INLIERS: &str = "bowloc_verify_top_inliers";
+pub const VERIFIED: &str = "bowloc_verify_answers_total";
 pub const WORKERS: &str = "bowloc_workers";
 pub const WORKERS_BUSY: &str = "bowloc_workers_busy";
 pub const QUEUE_WAITING: &str = "bowloc_queue_waiting";
@@ -51,11 +54,15 @@ pub fn install() -> PrometheusHandle {
             let features = [
                 0.0, 50.0, 100.0, 250.0, 500.0, 1000.0, 2000.0, 4000.0, 8000.0,
             ];
+            let inliers = [0.0, 4.0, 8.0, 12.0, 16.0, 24.0, 32.0, 50.0, 100.0, 200.0];
             let handle = PrometheusBuilder::new()
                 .set_buckets_for_metric(Matcher::Suffix("_seconds".into()), &latency)
                 .and_then(|b| b.set_buckets_for_metric(Matcher::Full(RATIO_USED.into()), &fraction))
                 .and_then(|b| {
                     b.set_buckets_for_metric(Matcher::Full(QUERY_FEATURES.into()), &features)
+                })
+                .and_then(|b| {
+                    b.set_buckets_for_metric(Matcher::Full(VERIFY_INLIERS.into()), &inliers)
                 })
                 .expect("bucket lists are not empty")
                 .install_recorder()
@@ -111,6 +118,19 @@ fn describe() {
     describe_counter!(
         STOPS,
         "Searches by why they stopped: rule, exhausted or deadline."
+    );
+    describe_histogram!(
+        VERIFY_DURATION,
+        Unit::Seconds,
+        "Time of geometric verification (matching and model fits of the top k candidates), for queries verified."
+    );
+    describe_histogram!(
+        VERIFY_INLIERS,
+        "Inliers of the best candidate after verification."
+    );
+    describe_counter!(
+        VERIFIED,
+        "Verified queries by whether the best candidate was verified (true/false)."
     );
     describe_gauge!(WORKERS, "Worker threads for CPU work.");
     describe_gauge!(WORKERS_BUSY, "Workers running a query now.");
@@ -174,6 +194,9 @@ fn zero_counters() {
     for kind in [StopKind::Rule, StopKind::Exhausted, StopKind::Deadline] {
         counter!(STOPS, "kind" => super::proto::stop_kind_name(kind)).absolute(0);
     }
+    for verified in ["true", "false"] {
+        counter!(VERIFIED, "verified" => verified).absolute(0);
+    }
 }
 
 /// The collector of the process's own metrics.
@@ -221,6 +244,12 @@ pub fn localized(answer: &Localization) {
     histogram!(RATIO_USED).record(answer.features.fraction);
     histogram!(QUERY_FEATURES).record(answer.features.total as f64);
     counter!(STOPS, "kind" => super::proto::stop_kind_name(answer.stop.kind)).increment(1);
+    if let Some(verified) = answer.verified {
+        histogram!(VERIFY_DURATION).record(t.verify / 1e3);
+        let top = answer.candidates.first().and_then(|c| c.inliers);
+        histogram!(VERIFY_INLIERS).record(top.unwrap_or(0) as f64);
+        counter!(VERIFIED, "verified" => verified.to_string()).increment(1);
+    }
 }
 
 /// The worker pool's size and occupancy.

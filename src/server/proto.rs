@@ -34,6 +34,9 @@ impl From<&Localization> for pb::Localization {
                     id: c.id,
                     name: c.name.clone(),
                     score: c.score,
+                    votes: c.votes,
+                    inliers: c.inliers,
+                    verified: c.verified,
                     place: c.place.clone(),
                     pose: c.pose.clone().unwrap_or_default(),
                 })
@@ -69,6 +72,7 @@ impl From<&Localization> for pb::Localization {
                 extract: a.timings_ms.extract,
                 quantize: a.timings_ms.quantize,
                 vote: a.timings_ms.vote,
+                verify: a.timings_ms.verify,
                 total: a.timings_ms.total,
             }),
             map: Some(pb::MapIdentity {
@@ -77,6 +81,7 @@ impl From<&Localization> for pb::Localization {
                 words: a.map.words as u64,
                 vocabulary: a.map.vocabulary.clone(),
             }),
+            verified: a.verified,
         }
     }
 }

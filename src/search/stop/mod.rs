@@ -72,6 +72,9 @@ pub struct RuleInfo {
     pub parameter: Option<&'static str>,
     /// One line for help texts.
     pub about: &'static str,
+    /// Whether the rule verifies candidates geometrically (it needs a
+    /// [`LeaderCheck`], and its answers are re-ranked by verification).
+    pub geometric: bool,
     /// Check a parameter value and build an instance.
     pub make: MakeRule,
 }

@@ -270,7 +270,10 @@ fn verified_stops_once_a_stable_leader_has_enough_inliers() {
         calls: 0,
     };
     assert_eq!(verified_stop(8.0, &s, &mut c), None);
-    assert_eq!(c.calls, (200 - verified::STABLE - 1) / verified::RECHECK + 1);
+    assert_eq!(
+        c.calls,
+        (200 - verified::STABLE - 1) / verified::RECHECK + 1
+    );
     // without a check the rule never stops
     let map = one_word_per_image();
     let view = map.view();

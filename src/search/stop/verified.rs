@@ -17,6 +17,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "verified",
     parameter: Some("inliers"),
     about: "stop when the leader is geometrically verified with at least m inliers",
+    geometric: true,
     make: |m, _| {
         if !(m.is_finite() && m >= 4.0 && m <= 1000.0 && m.fract() == 0.0) {
             return Err(format!(

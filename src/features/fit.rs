@@ -1,0 +1,217 @@
+//! The robust model fit of geometric verification, with OpenCV's calib3d:
+//! a homography or a fundamental matrix, by RANSAC or USAC/MAGSAC++. Both
+//! are deterministic (OpenCV seeds its samplers with a constant).
+
+use crate::geometry::verify::{Estimator, FitError, FitParams, Model, ModelFit};
+use opencv::core::{Mat, Point2f, Vector};
+use opencv::prelude::*;
+
+/// [`ModelFit`] by `cv::findHomography` / `cv::findFundamentalMat`.
+#[derive(Debug, Clone)]
+pub struct OpenCvFit {
+    params: FitParams,
+}
+
+impl OpenCvFit {
+    pub fn new(params: FitParams) -> Self {
+        Self { params }
+    }
+}
+
+fn points(p: &[[f32; 2]]) -> Vector<Point2f> {
+    p.iter().map(|&[x, y]| Point2f::new(x, y)).collect()
+}
+
+impl ModelFit for OpenCvFit {
+    fn params(&self) -> &FitParams {
+        &self.params
+    }
+
+    fn inliers(&self, query: &[[f32; 2]], map: &[[f32; 2]]) -> Result<Vec<bool>, FitError> {
+        let p = &self.params;
+        if query.len() != map.len() {
+            return Err(FitError(format!(
+                "{} query points but {} map points",
+                query.len(),
+                map.len()
+            )));
+        }
+        if query.len() < p.model.min_matches() {
+            return Ok(vec![false; query.len()]);
+        }
+        let (src, dst) = (points(query), points(map));
+        let mut mask = Mat::default();
+        let fail = |e: opencv::Error| FitError(e.message);
+        let model = match (p.model, p.estimator) {
+            (Model::Homography, estimator) => {
+                let method = match estimator {
+                    Estimator::Ransac => opencv::calib3d::RANSAC,
+                    Estimator::Magsac => opencv::calib3d::USAC_MAGSAC,
+                };
+                opencv::calib3d::find_homography_ext(
+                    &src,
+                    &dst,
+                    method,
+                    p.threshold_px,
+                    &mut mask,
+                    p.max_iters as i32,
+                    p.confidence,
+                )
+                .map_err(fail)?
+            }
+            (Model::Fundamental, estimator) => {
+                let method = match estimator {
+                    Estimator::Ransac => opencv::calib3d::FM_RANSAC,
+                    Estimator::Magsac => opencv::calib3d::USAC_MAGSAC,
+                };
+                opencv::calib3d::find_fundamental_mat(
+                    &src,
+                    &dst,
+                    method,
+                    p.threshold_px,
+                    p.confidence,
+                    p.max_iters as i32,
+                    &mut mask,
+                )
+                .map_err(fail)?
+            }
+        };
+        if model.empty() || mask.empty() {
+            return Ok(vec![false; query.len()]);
+        }
+        let flags: &[u8] = mask.data_typed().map_err(fail)?;
+        if flags.len() != query.len() {
+            return Err(FitError(format!(
+                "mask of {} values for {} points",
+                flags.len(),
+                query.len()
+            )));
+        }
+        Ok(flags.iter().map(|&f| f != 0).collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::matches::Correspondences;
+    use crate::geometry::verify::{VerifyParams, count_inliers};
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// A known homography: rotation, scale, shear, translation and a
+    /// perspective term.
+    const H: [[f32; 3]; 3] = [
+        [0.9, -0.15, 40.0],
+        [0.12, 1.05, -25.0],
+        [0.0002, -0.0001, 1.0],
+    ];
+
+    fn apply(p: [f32; 2]) -> [f32; 2] {
+        let w = H[2][0] * p[0] + H[2][1] * p[1] + H[2][2];
+        [
+            (H[0][0] * p[0] + H[0][1] * p[1] + H[0][2]) / w,
+            (H[1][0] * p[0] + H[1][1] * p[1] + H[1][2]) / w,
+        ]
+    }
+
+    /// 60 true pairs (with half-pixel noise) and 140 outliers, shuffled;
+    /// returns the pairs and which are true.
+    fn synthetic(seed: u64) -> (Correspondences, Vec<bool>) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut pairs: Vec<([f32; 2], [f32; 2], bool)> = Vec::new();
+        for i in 0..200 {
+            let q = [rng.random_range(0.0..640.0), rng.random_range(0.0..360.0)];
+            if i < 60 {
+                let t = apply(q);
+                let noise = [rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5)];
+                pairs.push((q, [t[0] + noise[0], t[1] + noise[1]], true));
+            } else {
+                let m = [rng.random_range(0.0..640.0), rng.random_range(0.0..360.0)];
+                pairs.push((q, m, false));
+            }
+        }
+        for i in (1..pairs.len()).rev() {
+            pairs.swap(i, rng.random_range(0..=i));
+        }
+        let c = Correspondences {
+            query: pairs.iter().map(|p| p.0).collect(),
+            map: pairs.iter().map(|p| p.1).collect(),
+        };
+        (c, pairs.iter().map(|p| p.2).collect())
+    }
+
+    fn fit(model: Model, estimator: Estimator) -> OpenCvFit {
+        OpenCvFit::new(
+            VerifyParams {
+                model,
+                estimator,
+                threshold_px: 3.0,
+                ..Default::default()
+            }
+            .fit(),
+        )
+    }
+
+    #[test]
+    fn the_inliers_found_are_the_true_pairs() {
+        for estimator in [Estimator::Ransac, Estimator::Magsac] {
+            let f = fit(Model::Homography, estimator);
+            for seed in 0..3 {
+                let (c, truth) = synthetic(seed);
+                let mask = f.inliers(&c.query, &c.map).unwrap();
+                let found_true = mask.iter().zip(&truth).filter(|(m, t)| **m && **t).count();
+                let found_false = mask.iter().zip(&truth).filter(|(m, t)| **m && !**t).count();
+                // every true pair, and at most a stray outlier lying near the model by chance
+                assert_eq!(found_true, 60, "{estimator:?} seed {seed}");
+                assert!(found_false <= 2, "{estimator:?} seed {seed}: {found_false}");
+                let v = count_inliers(&c, &f, 30);
+                assert!(v.verified && (60..=62).contains(&v.inliers), "{v:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_fundamental_matrix_also_keeps_the_true_pairs() {
+        let f = fit(Model::Fundamental, Estimator::Ransac);
+        let (c, truth) = synthetic(7);
+        let mask = f.inliers(&c.query, &c.map).unwrap();
+        let found_true = mask.iter().zip(&truth).filter(|(m, t)| **m && **t).count();
+        assert!(found_true >= 57, "{found_true}");
+    }
+
+    #[test]
+    fn degenerate_input_answers_cleanly() {
+        for model in [Model::Homography, Model::Fundamental] {
+            for estimator in [Estimator::Ransac, Estimator::Magsac] {
+                let f = fit(model, estimator);
+                // too few pairs
+                let few = Correspondences {
+                    query: vec![[1.0, 2.0], [3.0, 5.0], [9.0, 1.0]],
+                    map: vec![[1.0, 2.0], [3.0, 5.0], [9.0, 1.0]],
+                };
+                assert_eq!(count_inliers(&few, &f, 1).inliers, 0);
+                assert_eq!(f.inliers(&few.query, &few.map).unwrap(), vec![false; 3]);
+                // collinear
+                let line = Correspondences {
+                    query: (0..30).map(|i| [i as f32 * 7.0, i as f32 * 3.0]).collect(),
+                    map: (0..30).map(|i| [i as f32 * 5.0, 40.0]).collect(),
+                };
+                let v = count_inliers(&line, &f, 1);
+                assert_eq!(
+                    (v.inliers, v.verified),
+                    (0, false),
+                    "{model:?} {estimator:?}"
+                );
+                // one point
+                let point = Correspondences {
+                    query: vec![[10.0, 10.0]; 30],
+                    map: vec![[20.0, 30.0]; 30],
+                };
+                assert_eq!(count_inliers(&point, &f, 1).inliers, 0);
+                // mismatched lengths are an error, not a panic
+                assert!(f.inliers(&[[0.0, 0.0]; 9], &[[0.0, 0.0]; 8]).is_err());
+            }
+        }
+    }
+}

@@ -1,0 +1,144 @@
+//! Tentative correspondences between a query and one map image: every pair of
+//! features that quantized to the same visual word. A word frequent in either
+//! image (a repeated texture) would add many pairs of which at most one can
+//! be right, so words giving more than `max_word_pairs` pairs are skipped.
+
+use super::Keypoint;
+use super::packed::PackedFeature;
+
+/// A query's features by word, ready to be matched against many map images.
+#[derive(Debug, Clone, Default)]
+pub struct QueryFeatures {
+    /// (word, position), sorted by word.
+    sorted: Vec<(u32, [f32; 2])>,
+}
+
+impl QueryFeatures {
+    pub fn new(features: &[(u32, Keypoint)]) -> Self {
+        let mut sorted: Vec<(u32, [f32; 2])> =
+            features.iter().map(|(w, k)| (*w, [k.x, k.y])).collect();
+        sorted.sort_by_key(|f| f.0);
+        Self { sorted }
+    }
+
+    pub fn len(&self) -> usize {
+        self.sorted.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.sorted.is_empty()
+    }
+}
+
+/// Matched positions: `query[i]` ↔ `map[i]`. Identical pairs (a keypoint
+/// SIFT reports twice, once per orientation) appear once.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Correspondences {
+    pub query: Vec<[f32; 2]>,
+    pub map: Vec<[f32; 2]>,
+}
+
+impl Correspondences {
+    pub fn len(&self) -> usize {
+        self.query.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.query.is_empty()
+    }
+}
+
+/// Pairs of features sharing a word (a merge of the two word-sorted lists).
+/// `map` must be sorted by word, as [`super::packed::pack_image`] stores it.
+pub fn tentative(
+    query: &QueryFeatures,
+    map: &[PackedFeature],
+    max_word_pairs: usize,
+) -> Correspondences {
+    let q = &query.sorted;
+    let mut out = Correspondences::default();
+    let mut seen: Vec<([u32; 2], [u32; 2])> = Vec::new();
+    let (mut i, mut j) = (0, 0);
+    while i < q.len() && j < map.len() {
+        let (wq, wm) = (q[i].0, map[j].word);
+        if wq < wm {
+            i += 1;
+        } else if wm < wq {
+            j += 1;
+        } else {
+            let qe = i + q[i..].iter().take_while(|f| f.0 == wq).count();
+            let me = j + map[j..].iter().take_while(|f| f.word == wq).count();
+            if (qe - i) * (me - j) <= max_word_pairs {
+                for qf in &q[i..qe] {
+                    for mf in &map[j..me] {
+                        let m = mf.point();
+                        let key = (qf.1.map(f32::to_bits), m.map(f32::to_bits));
+                        if !seen.contains(&key) {
+                            seen.push(key);
+                            out.query.push(qf.1);
+                            out.map.push(m);
+                        }
+                    }
+                }
+            }
+            seen.clear();
+            i = qe;
+            j = me;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kp(x: f32, y: f32) -> Keypoint {
+        Keypoint {
+            x,
+            y,
+            size: 2.0,
+            angle: 0.0,
+            response: 0.0,
+        }
+    }
+
+    fn map(features: &[(u32, f32, f32)]) -> Vec<PackedFeature> {
+        let words: Vec<u32> = features.iter().map(|f| f.0).collect();
+        let kps: Vec<Keypoint> = features.iter().map(|f| kp(f.1, f.2)).collect();
+        super::super::packed::pack_image(&words, &kps)
+    }
+
+    #[test]
+    fn shared_words_pair_up_and_frequent_words_are_skipped() {
+        let query = QueryFeatures::new(&[
+            (7, kp(1.0, 1.0)),
+            (3, kp(2.0, 2.0)),
+            (9, kp(3.0, 3.0)),
+            (9, kp(4.0, 4.0)),
+            (5, kp(6.0, 6.0)),
+        ]);
+        let m = map(&[
+            (3, 10.0, 10.0),
+            (9, 30.0, 30.0),
+            (9, 40.0, 40.0),
+            (9, 50.0, 50.0),
+            (7, 70.0, 70.0),
+            (8, 80.0, 80.0),
+        ]);
+        let c = tentative(&query, &m, 4);
+        // word 9 gives 2 × 3 = 6 pairs > 4: skipped; words 5 and 8 are unshared.
+        assert_eq!(c.query, vec![[2.0, 2.0], [1.0, 1.0]]);
+        assert_eq!(c.map, vec![[10.0, 10.0], [70.0, 70.0]]);
+        assert_eq!(tentative(&query, &m, 6).len(), 8);
+        assert!(tentative(&query, &[], 4).is_empty());
+        assert!(tentative(&QueryFeatures::default(), &m, 4).is_empty());
+    }
+
+    #[test]
+    fn repeated_keypoints_give_one_pair() {
+        let query = QueryFeatures::new(&[(1, kp(5.0, 5.0)), (1, kp(5.0, 5.0))]);
+        let c = tentative(&query, &map(&[(1, 8.0, 8.0)]), 4);
+        assert_eq!(c.len(), 1);
+    }
+}
