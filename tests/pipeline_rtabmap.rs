@@ -196,7 +196,10 @@ fn cli_reports_bad_input_clearly() {
         "--rule",
         "bogus",
     ]);
-    assert!(!ok && err.contains("unknown rule"), "{err}");
+    assert!(
+        !ok && err.contains("invalid value 'bogus'") && err.contains("peak-mean"),
+        "{err}"
+    );
     let (ok, err) = run(&[
         "query",
         "--vocab",

@@ -179,6 +179,22 @@ check "rule fixed 0.5 uses half the features" jqt --arg s "$status" '
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=hoeffding&delta=0.1&min_score=1000")
 check "min_score drops every candidate" test "$status/$(jq '.candidates | length' "$B")" = "200/0"
 
+# Streaming extraction, the verified stop and the one rule parser.
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=verified&inliers=12&seed=3")
+check "rule verified answers with inlier counts ($(jq -c '{tiles, stop: .stop.detail}' "$B"))" jqt --arg s "$status" '
+  $s == "200" and .rule.name == "verified" and .rule.parameter == "inliers"
+  and (.candidates[0] | has("inliers") and has("verified"))
+  and .tiles.extracted <= .tiles.total and .features.extracted >= .features.used' "$B"
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=3x2%2B16&seed=3")
+check "tiles=3x2+16: the full search extracts all 6 tiles" jqt --arg s "$status" '
+  $s == "200" and .tiles == {"extracted": 6, "total": 6, "grid": "3x2+16"}
+  and .features.extracted == .features.total and .features.used == .features.total' "$B"
+for bad in "tiles=0x2" "rule=none&threshold=2" "rule=peak-mean&inliers=12" "rule=verified&inliers=3"; do
+  status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?$bad")
+  check "$bad is 400 invalid_parameter ($(jq -r .error.message "$B"))" \
+    test "$status/$(jq -r .error.code "$B")" = "400/invalid_parameter"
+done
+
 # A flat grey image has no SIFT features: a 200 answer with no candidates.
 { printf 'P5\n64 64\n255\n'; head -c 4096 /dev/zero | tr '\0' '\200'; } >"$TMP/flat.pgm"
 status=$(req "$B" -H 'Content-Type: image/x-portable-graymap' --data-binary @"$TMP/flat.pgm" "$BASE/localize")
@@ -369,9 +385,12 @@ check "shutdown is logged" grep -q 'stopped' "$TMP/server.log"
 write_config "$TMP/tight.toml" 1 0 10000 50
 if start_server "$TMP/tight.toml" "$TMP/tight.log"; then
   ok "server with one worker and no queue starts"
-  status=$(req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize")
+  status=$(req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=1x1")
   check "limits.max_features caps the features of a query ($(jq .features.total "$TMP/first.json") → $(jq .features.total "$B"))" \
     jqt --slurpfile first "$TMP/first.json" '.features.total == 50 and $first[0].features.total > 50' "$B"
+  status=$(req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=2x2")
+  check "the cap is shared out over the tiles of streaming extraction ($(jq -c .tiles "$B"))" \
+    jqt '.features.total <= 50 and .features.extracted == .features.total and .tiles.extracted == .tiles.total' "$B"
   # One worker, no queue: of requests sent at once, those beyond the first
   # running are refused with 503 and Retry-After, never queued.
   curls=()
