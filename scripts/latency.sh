@@ -3,7 +3,11 @@
 # request at a time against a live `bowloc serve` on loopback (K = 5000 map of
 # gardens-point, 960×540 query images, default rule), comparing curl's total
 # time with the SIFT extraction time the answer reports. Prints medians and
-# the share of the request that is not SIFT extraction.
+# the share of the request that is not SIFT extraction. Then, in the same
+# run, each query twice in turn: the full search on the whole image
+# (rule=none&tiles=1x1, what streaming and stopping save against) and the
+# default configuration (streaming extraction, default rule): both medians,
+# their ratio and the median of the per-query ratios.
 #
 #   scripts/latency.sh [EVERY] [RULE-QUERY]
 #
@@ -36,3 +40,20 @@ share=$(awk -F'\t' '{print 100 * ($1 - $3) / $1}' "$tmp/rows" | median)
 echo "requests=$(wc -l <"$tmp/rows") rule=$(jq -r '.rule.name + " " + (.rule.value | tostring)' "$tmp/answer.json")"
 echo "median_ms request=$(col 1) decode=$(col 2) extract=$(col 3) quantize=$(col 4) vote=$(col 5) server_total=$(col 6) fraction_used=$(col 7)"
 echo "median share of a request that is not SIFT extraction: ${share}%"
+: >"$tmp/pairs"
+for pass in 1 2 3; do
+  awk -v e="$every" 'NR % e == 1' $src/queries.txt | while read -r q; do
+    full=$(curl -s -o /dev/null -w '%{time_total}' -H 'Content-Type: image/jpeg' \
+      --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass&rule=none&tiles=1x1")
+    default=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
+      --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass${extra:+&$extra}")
+    tiles=$(jq -r '"\(.tiles.extracted)/\(.tiles.total)"' "$tmp/answer.json")
+    printf '%s\t%s\t%s\n' "$full" "$default" "$tiles" >>"$tmp/pairs"
+  done
+done
+full_ms=$(cut -f1 "$tmp/pairs" | median | awk '{print $1 * 1000}')
+default_ms=$(cut -f2 "$tmp/pairs" | median | awk '{print $1 * 1000}')
+per_query=$(awk -F'\t' '{print $2 / $1}' "$tmp/pairs" | median)
+tiles=$(awk -F'\t' '{split($3, t, "/"); s += t[1] / t[2]} END {printf "%.3f", s / NR}' "$tmp/pairs")
+echo "full search, whole image: median ${full_ms} ms; default${extra:+ ($extra)}, streaming: median ${default_ms} ms"
+echo "ratio of medians $(awk -v a="$default_ms" -v b="$full_ms" 'BEGIN {printf "%.3f", a / b}'); median per-query ratio ${per_query}; mean share of tiles extracted ${tiles}"

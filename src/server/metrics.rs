@@ -27,6 +27,8 @@ pub const LOCALIZE_DURATION: &str = "bowloc_localize_duration_seconds";
 pub const STAGE_DURATION: &str = "bowloc_localize_stage_duration_seconds";
 pub const RATIO_USED: &str = "bowloc_localize_features_used_ratio";
 pub const QUERY_FEATURES: &str = "bowloc_localize_query_features";
+pub const TILES_RATIO: &str = "bowloc_localize_tiles_extracted_ratio";
+pub const EXTRACTION_SAVED: &str = "bowloc_localize_extraction_saved_seconds";
 pub const STOPS: &str = "bowloc_localize_stops_total";
 pub const VERIFY_DURATION: &str = "bowloc_verify_duration_seconds";
 pub const VERIFY_INLIERS: &str = "bowloc_verify_top_inliers";
@@ -58,6 +60,7 @@ pub fn install() -> PrometheusHandle {
             let handle = PrometheusBuilder::new()
                 .set_buckets_for_metric(Matcher::Suffix("_seconds".into()), &latency)
                 .and_then(|b| b.set_buckets_for_metric(Matcher::Full(RATIO_USED.into()), &fraction))
+                .and_then(|b| b.set_buckets_for_metric(Matcher::Full(TILES_RATIO.into()), &fraction))
                 .and_then(|b| {
                     b.set_buckets_for_metric(Matcher::Full(QUERY_FEATURES.into()), &features)
                 })
@@ -115,6 +118,15 @@ fn describe() {
         "Ratio of a query's features used before the search stopped (0 to 1)."
     );
     describe_histogram!(QUERY_FEATURES, "Features extracted from a query image.");
+    describe_histogram!(
+        TILES_RATIO,
+        "Ratio of a query's tiles extracted before the search stopped (streaming extraction)."
+    );
+    describe_histogram!(
+        EXTRACTION_SAVED,
+        Unit::Seconds,
+        "Extraction time saved by stopping before the last tile: the tiles left, at the mean time of the tiles extracted."
+    );
     describe_counter!(
         STOPS,
         "Searches by why they stopped: rule, exhausted or deadline."
@@ -243,6 +255,12 @@ pub fn localized(answer: &Localization) {
     histogram!(LOCALIZE_DURATION).record(t.total / 1e3);
     histogram!(RATIO_USED).record(answer.features.fraction);
     histogram!(QUERY_FEATURES).record(answer.features.total as f64);
+    let tiles = &answer.tiles;
+    if tiles.total > 0 && tiles.extracted > 0 {
+        histogram!(TILES_RATIO).record(tiles.extracted as f64 / tiles.total as f64);
+        let left = (tiles.total - tiles.extracted) as f64;
+        histogram!(EXTRACTION_SAVED).record(t.extract / 1e3 * left / tiles.extracted as f64);
+    }
     counter!(STOPS, "kind" => super::proto::stop_kind_name(answer.stop.kind)).increment(1);
     if let Some(verified) = answer.verified {
         histogram!(VERIFY_DURATION).record(t.verify / 1e3);

@@ -324,7 +324,8 @@ check "a 400 is not counted as a rejection ($rejections_before → $rejections_a
   test "$rejections_after" = "$rejections_before"
 curl -s "$BASE/metrics" >"$TMP/metrics.txt"
 for name in bowloc_http_request_duration_seconds_bucket bowloc_localize_features_used_ratio_bucket \
-  bowloc_localize_query_features_bucket bowloc_http_requests_in_flight bowloc_map_images \
+  bowloc_localize_query_features_bucket bowloc_localize_tiles_extracted_ratio_bucket \
+  bowloc_localize_extraction_saved_seconds_bucket bowloc_http_requests_in_flight bowloc_map_images \
   bowloc_map_words bowloc_workers_busy bowloc_queue_waiting bowloc_localize_stops_total \
   bowloc_localize_duration_seconds_bucket bowloc_http_connections_open; do
   check "metrics export $name" grep -q "^$name" "$TMP/metrics.txt"
