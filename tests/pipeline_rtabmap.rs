@@ -287,6 +287,8 @@ fn cli_reports_bad_input_clearly() {
             "fixed",
             "--fraction",
             "0.5",
+            "--min-features",
+            "0",
             "--seed",
             "4",
         ])

@@ -60,10 +60,14 @@ pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
             bail!("{}: is a directory, not a {what} file", path.display());
         }
     }
+    let defaults = FilesConfig::default();
+    let own_files = files.vocabulary == defaults.vocabulary && files.map == defaults.map;
+    if own_files && config.bootstrap.enabled {
+        retire_old_default_map(&files.map);
+    }
     let (vocab_missing, map_missing) = (!files.vocabulary.exists(), !files.map.exists());
     if vocab_missing || map_missing {
-        let defaults = FilesConfig::default();
-        if files.vocabulary != defaults.vocabulary || files.map != defaults.map {
+        if !own_files {
             bail!(
                 "{} (bootstrap builds only the default files {} and {})",
                 missing(config),
@@ -120,6 +124,27 @@ fn missing(config: &Config) -> String {
 
 /// Build the map (and the vocabulary first, when `vocab_missing`) from the
 /// bootstrap dataset's map images.
+/// A default map of an older format (from an earlier version of bowloc) is
+/// moved aside as `<name>.old`, so bootstrap builds it again: the default
+/// files are bootstrap's own. A user's map is never touched.
+fn retire_old_default_map(map: &std::path::Path) {
+    if let Err(crate::store::StoreError::WrongVersion { found, expected, .. }) =
+        crate::index::MapIndex::open(map, false)
+    {
+        let old = map.with_extension("bowmap.old");
+        tracing::warn!(
+            map = %map.display(),
+            found,
+            expected,
+            "the default map has an older format: moved to {} and rebuilt",
+            old.display()
+        );
+        if let Err(e) = std::fs::rename(map, &old) {
+            tracing::warn!("cannot move {} aside: {e}", map.display());
+        }
+    }
+}
+
 fn build_missing(config: &Config, vocab_missing: bool, progress: &Progress) -> anyhow::Result<()> {
     let b = &config.bootstrap;
     let list = b.dataset.join("map.txt");
