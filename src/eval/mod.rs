@@ -368,13 +368,16 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             let mut indices = vec![0];
             indices.extend(explicit.iter().copied().filter(|&i| i != 0));
             let bar = progress_bar(indices.len() as u64, "verifying");
+            let inputs = verify::Inputs {
+                map: &map,
+                queries: &queries,
+                truth: &dataset.truth,
+            };
             let rows = indices
                 .into_iter()
                 .map(|i| {
                     let row = verify::verify_setting(
-                        &map,
-                        &queries,
-                        &dataset.truth,
+                        &inputs,
                         &summaries[i].label,
                         i,
                         &outcomes[i],

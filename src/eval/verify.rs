@@ -128,19 +128,26 @@ fn verify_one(
     }
 }
 
-/// Verify the answers `runs[run][query]` of the setting at `index` and
-/// compare. `queries[q]` must hold every feature of query q, in the order
-/// the sweep's words came in.
+/// What every setting's verification needs: the map, each query's features
+/// (`queries[q]` holds every feature of query q, in the order the sweep's
+/// words came in) and the ground truth.
+pub struct Inputs<'a> {
+    pub map: &'a MapIndex,
+    pub queries: &'a [QueryGeometry],
+    pub truth: &'a [HashSet<u32>],
+}
+
+/// Verify the answers `runs[run][query]` of the setting at `index` (named
+/// `label`) and compare.
 pub fn verify_setting(
-    map: &MapIndex,
-    queries: &[QueryGeometry],
-    truth: &[HashSet<u32>],
+    inputs: &Inputs<'_>,
     label: &str,
     index: usize,
     runs: &[Vec<Outcome>],
     fit: &dyn ModelFit,
     params: &VerifyParams,
 ) -> VerifiedRow {
+    let (map, queries, truth) = (inputs.map, inputs.queries, inputs.truth);
     let verified: Vec<Vec<Verified>> = runs
         .iter()
         .enumerate()
