@@ -96,6 +96,7 @@ pub fn full_top1(map: &MapIndex, queries: &[Vec<u32>]) -> Vec<Option<u32>> {
         rule: RuleSpec::new("none", None).expect("built in"),
         min_features: 0,
         target: None,
+        verify: false,
     };
     queries
         .par_iter()
@@ -124,6 +125,7 @@ pub fn calibrate_rule(
         rule: RuleSpec::new(rule, Some(p)).expect("within the rule's range"),
         min_features,
         target: None,
+        verify: false,
     };
     let run = |p: f64| measure(&pseudo.map, &pseudo.queries, full, &setting(p), runs);
     // the aggressive end is the one using fewer features

@@ -6,7 +6,7 @@ use crate::dataset::ImageRef;
 use crate::features::fit::OpenCvFit;
 use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
 use crate::geometry::Keypoint;
-use crate::geometry::verify::{VerifyParams, rerank};
+use crate::geometry::verify::{LeaderVerifier, VerifyParams, rerank, with_keypoints};
 use crate::index::{ImageWords, MapBuilder, MapIndex, Places};
 use crate::quantize::{Quantizer, QuantizerKind};
 use crate::report::{EdgeTimings, Extraction, ImageSize, Localization};
@@ -35,11 +35,57 @@ pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
 /// One image's features and what reading them cost.
 #[derive(Debug, Clone)]
 pub struct Extracted {
+    /// Keypoints and descriptor rows tile by tile, in grid order.
     pub features: Features,
     /// Reading and decoding the file.
     pub decode: Duration,
-    /// Feature extraction on the decoded image.
+    /// Feature extraction on the decoded image (all tiles).
     pub extract: Duration,
+    /// Each tile in grid order: its features, its share of the image's area
+    /// and its extraction time (one tile when extracted whole).
+    pub tiles: Vec<TileCost>,
+}
+
+/// What one tile of an image held and cost.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TileCost {
+    pub features: usize,
+    pub area: f64,
+    pub extract: Duration,
+}
+
+/// Extract a decoded image tile by tile in grid order, timing each tile.
+pub fn extract_tiled(
+    image: &features::GrayImage,
+    config: &ExtractConfig,
+    grid: TileGrid,
+) -> Result<(Features, Vec<TileCost>), FeatureError> {
+    let mut tiles = Tiles::new(image, config, grid, |n| (0..n as u32).collect())?;
+    let mut parts = Vec::with_capacity(tiles.total());
+    let mut costs = Vec::with_capacity(tiles.total());
+    let mut area = 0.0;
+    loop {
+        let started = Instant::now();
+        let Some(tile) = tiles.next_tile() else { break };
+        let tile = tile?;
+        let share = tiles.area_extracted();
+        costs.push(TileCost {
+            features: tile.len(),
+            area: share - area,
+            extract: started.elapsed(),
+        });
+        area = share;
+        parts.push(tile);
+    }
+    let refs: Vec<&Features> = parts.iter().collect();
+    let features = Features {
+        descriptors: stack(&refs),
+        keypoints: parts
+            .iter()
+            .flat_map(|p| p.keypoints.iter().copied())
+            .collect(),
+    };
+    Ok((features, costs))
 }
 
 /// Features (keypoints and descriptors) of every image, in parallel, one
@@ -53,14 +99,16 @@ pub fn extract_all(
     strict: bool,
     what: &str,
 ) -> anyhow::Result<Vec<Option<Features>>> {
-    let timed = extract_all_timed(images, config, limits, strict, what)?;
+    let timed = extract_all_timed(images, config, TileGrid::WHOLE, limits, strict, what)?;
     Ok(timed.into_iter().map(|e| e.map(|e| e.features)).collect())
 }
 
-/// [`extract_all`], keeping how long each image took to decode and extract.
+/// [`extract_all`], tile by tile with `grid`, keeping how long each image
+/// took to decode and each tile to extract.
 pub fn extract_all_timed(
     images: &[ImageRef],
     config: &ExtractConfig,
+    grid: TileGrid,
     limits: DecodeLimits,
     strict: bool,
     what: &str,
@@ -73,11 +121,12 @@ pub fn extract_all_timed(
             let started = Instant::now();
             let r = features::decode_file(&image.path, limits).and_then(|decoded| {
                 let read = started.elapsed();
-                let features = features::extract(&decoded, config)?;
+                let (features, tiles) = extract_tiled(&decoded, config, grid)?;
                 Ok(Extracted {
                     features,
                     decode: read,
                     extract: started.elapsed() - read,
+                    tiles,
                 })
             });
             bar.inc(1);
@@ -287,10 +336,6 @@ pub struct Localizer {
     fit: OpenCvFit,
 }
 
-/// Salt of the tile order's seed, so the tile order and the order of the
-/// features inside the first tile are not drawn from the same stream.
-const TILE_ORDER_SALT: u64 = 0x7469_6c65_6f72_6465;
-
 impl Localizer {
     /// Open both files and check that the map was built with the vocabulary.
     pub fn open(vocab: &Path, map: &Path, verify: bool) -> anyhow::Result<Self> {
@@ -377,6 +422,8 @@ impl Localizer {
         grid: TileGrid,
         verify: bool,
     ) -> Result<Localization, FeatureError> {
+        // a geometric stop verified its leader: its answer is verified too
+        let verify = verify || options.rule.info().geometric;
         let (searched, options) = match verify {
             true => (self.options_for_verify(options), options),
             false => (options.clone(), options),
@@ -389,7 +436,7 @@ impl Localizer {
             height: image.height(),
         };
         let mut tiles = Tiles::new(&image, &self.extract, grid, |n| {
-            search::permute::permutation(n, options.seed ^ TILE_ORDER_SALT)
+            search::permute::tile_order(n, options.seed)
         })?;
         let mut extract = decoded.elapsed();
         let quantizer = self.vocab.quantizer(self.quantizer);
@@ -400,16 +447,23 @@ impl Localizer {
             let Some(tile) = tiles.next_tile() else { break };
             let tile = tile?;
             extract += t.elapsed();
-            if verify {
-                keypoints.extend_from_slice(&tile.keypoints);
-            }
-            let fed = search.fed() + tile.len();
-            if tiles.extracted() == tiles.total() {
-                search.set_total(fed);
-            } else {
-                search.set_expected_total(fed as f64 / tiles.area_extracted().max(1e-9));
-            }
-            if search::feed_descriptors(&mut search, &*quantizer, tile.descriptors.view()) {
+            keypoints.extend_from_slice(&tile.keypoints);
+            let quantize =
+                search::descriptor_quantizer(&*quantizer, tile.descriptors.view(), options.block);
+            let last = tiles.extracted() == tiles.total();
+            let mut check = LeaderVerifier {
+                map: &self.map,
+                fit: &self.fit,
+                params: &self.verify,
+                keypoints: &keypoints,
+            };
+            if search.feed_tile(
+                tile.len(),
+                tiles.area_extracted(),
+                last,
+                quantize,
+                Some(&mut check),
+            ) {
                 break;
             }
         }
@@ -424,12 +478,7 @@ impl Localizer {
             decode: decoded - started,
             extract,
         };
-        // the features the search used, as (word, keypoint)
-        let query: Vec<(u32, Keypoint)> = search
-            .voted()
-            .iter()
-            .filter_map(|&(i, w)| keypoints.get(i as usize).map(|k| (w, *k)))
-            .collect();
+        let query = with_keypoints(search.voted(), &keypoints);
         let outcome = search.finish();
         let answer = Localization::new(
             &self.map,

@@ -114,6 +114,7 @@ pub fn run(a: CalibrateArgs) -> anyhow::Result<()> {
                 rule: RuleSpec::new("none", None).expect("built in"),
                 min_features: 0,
                 target: None,
+                verify: false,
             };
             write!(
                 table,
@@ -148,6 +149,7 @@ fn setting_of(c: &Calibrated) -> Setting {
         rule: RuleSpec::new(&c.rule, Some(c.parameter)).expect("calibrated within range"),
         min_features: c.min_features,
         target: None,
+        verify: false,
     }
 }
 

@@ -3,6 +3,7 @@
 
 use super::args::{ExtractArgs, VerifyArgs};
 use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig};
+use bowloc::features::TileGrid;
 use clap::Args;
 use std::path::PathBuf;
 
@@ -50,6 +51,10 @@ pub struct EvalArgs {
     /// Skip the PNG/SVG figures.
     #[arg(long)]
     no_plots: bool,
+    /// The queries' tile grid for streaming extraction, COLSxROWS[+MARGIN]
+    /// (1x1: whole images). The full search also runs on whole queries.
+    #[arg(long, default_value = "2x2+24")]
+    tiles: TileGrid,
     #[command(flatten)]
     extract: ExtractArgs,
     /// With --verify: rows with and without geometric verification for the
@@ -78,6 +83,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         tolerance: a.tolerance,
         histogram: a.histogram,
         extract: a.extract.config(),
+        tiles: a.tiles,
         vocab: a.vocab,
         out: a
             .out

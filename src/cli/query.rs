@@ -1,6 +1,7 @@
 //! `bowloc query`: localize image files and print the answers as JSON.
 
 use super::args::{SearchArgs, VerifyArgs};
+use bowloc::features::TileGrid;
 use bowloc::pipeline::Localizer;
 use clap::Args;
 use std::path::PathBuf;
@@ -18,12 +19,17 @@ pub struct QueryArgs {
     images: Vec<PathBuf>,
     #[command(flatten)]
     search: SearchArgs,
+    /// Streaming extraction's tile grid, COLSxROWS[+MARGIN] (1x1: the whole
+    /// image at once).
+    #[arg(long, default_value = "2x2+24")]
+    tiles: TileGrid,
     #[command(flatten)]
     verify: VerifyArgs,
 }
 
 pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     let mut localizer = Localizer::open(&a.vocab, &a.map, true)?;
+    localizer.tiles = a.tiles;
     localizer.set_verify(a.verify.params()?);
     let options = a.search.options()?;
     let mut answers = Vec::with_capacity(a.images.len());

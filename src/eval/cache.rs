@@ -12,8 +12,9 @@
 //! other images is rebuilt, not reused. Vocabulary and map file names carry
 //! the checksum of the descriptors they come from, so they cannot go stale.
 
+use super::tiles::{Query, Tile};
 use crate::dataset::ImageRef;
-use crate::features::{DecodeLimits, ExtractConfig, Features};
+use crate::features::{DecodeLimits, ExtractConfig, Features, TileGrid};
 use crate::geometry::Keypoint;
 use crate::index::MapIndex;
 use crate::pipeline::{extract_all_timed, index_descriptors, train_vocabulary};
@@ -26,8 +27,8 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 const MAGIC: [u8; 8] = *b"BOWLOCDE";
-/// 2: keypoints beside the descriptors.
-const VERSION: u32 = 2;
+/// 2: keypoints beside the descriptors; 3: tiles and their times.
+const VERSION: u32 = 3;
 /// Descriptor width (SIFT).
 const DIM: usize = 128;
 /// Values per keypoint row: x, y, size, angle, response.
@@ -51,6 +52,17 @@ pub struct DescriptorMeta {
     pub decode_ms: Vec<f64>,
     /// Per image: feature extraction on the decoded image, in milliseconds.
     pub extract_ms: Vec<f64>,
+    /// How the images were cut into tiles (the rows of an image are in grid
+    /// order, tile 0's first).
+    #[serde(default = "whole_image")]
+    pub grid: TileGrid,
+    /// Per image, per tile in grid order: features, area share, time.
+    #[serde(default)]
+    pub tiles: Vec<Vec<Tile>>,
+}
+
+fn whole_image() -> TileGrid {
+    TileGrid::WHOLE
 }
 
 /// The descriptors of an image list, memory-mapped from the cache.
@@ -132,6 +144,21 @@ impl DescriptorSet {
         self.meta.decode_ms[i] + self.meta.extract_ms[i]
     }
 
+    /// Image `i` as the sweep replays it, given its words (rows in order):
+    /// its keypoints, its tiles, and decoding plus what extraction spends
+    /// outside the tiles (downscaling) as the fixed cost.
+    pub fn query(&self, i: usize, words: Vec<u32>) -> Query {
+        let tiles = self.meta.tiles.get(i).cloned().unwrap_or_default();
+        let in_tiles: f64 = tiles.iter().map(|t| t.ms as f64).sum();
+        Query {
+            words,
+            keypoints: self.keypoints(i),
+            fixed_ms: (self.extract_ms(i) - in_tiles).max(0.0) as f32,
+            tiles,
+            geometry: None,
+        }
+    }
+
     /// Checksum of the descriptors: names the files derived from them.
     pub fn hash(&self) -> u64 {
         self.store
@@ -173,7 +200,12 @@ fn open(path: &Path) -> anyhow::Result<DescriptorSet> {
             meta.readable.len(),
             meta.decode_ms.len(),
             meta.extract_ms.len(),
-        ] == [n; 3];
+            meta.tiles.len(),
+        ] == [n; 4]
+        && (0..n).all(|i| {
+            meta.tiles[i].iter().map(|t| t.features as u64).sum::<u64>()
+                == offsets[i + 1] - offsets[i]
+        });
     if !consistent {
         return Err(store
             .invalid("offsets, rows and image list disagree")
@@ -182,18 +214,24 @@ fn open(path: &Path) -> anyhow::Result<DescriptorSet> {
     Ok(DescriptorSet { store, meta })
 }
 
-/// The descriptors of `images` extracted with `config`: from `path` when it
-/// holds exactly those, else extracted (in parallel, timed) and written there.
+/// The descriptors of `images` extracted with `config`, tile by tile with
+/// `grid`: from `path` when it holds exactly those, else extracted (in
+/// parallel, timed) and written there.
 pub fn descriptors(
     path: &Path,
     images: &[ImageRef],
     config: &ExtractConfig,
+    grid: TileGrid,
     what: &str,
 ) -> anyhow::Result<DescriptorSet> {
     let stamps = stamps(images)?;
     if path.exists() {
         match open(path) {
-            Ok(set) if set.meta.extract == *config && set.meta.images == stamps => {
+            Ok(set)
+                if set.meta.extract == *config
+                    && set.meta.images == stamps
+                    && set.meta.grid == grid =>
+            {
                 tracing::info!(path = %path.display(), images = set.len(), "descriptors from cache");
                 return Ok(set);
             }
@@ -203,7 +241,7 @@ pub fn descriptors(
             Err(e) => tracing::warn!("unusable cache, re-extracting: {e:#}"),
         }
     }
-    let extracted = extract_all_timed(images, config, DecodeLimits::default(), false, what)?;
+    let extracted = extract_all_timed(images, config, grid, DecodeLimits::default(), false, what)?;
     let mut data: Vec<f32> = Vec::new();
     let mut keypoints: Vec<f32> = Vec::new();
     let mut offsets = vec![0u64];
@@ -214,6 +252,8 @@ pub fn descriptors(
         readable: Vec::with_capacity(images.len()),
         decode_ms: Vec::with_capacity(images.len()),
         extract_ms: Vec::with_capacity(images.len()),
+        grid,
+        tiles: Vec::with_capacity(images.len()),
     };
     for e in &extracted {
         if let Some(e) = e {
@@ -235,6 +275,16 @@ pub fn descriptors(
             .push(e.as_ref().map_or(0.0, |e| ms(e.decode)));
         meta.extract_ms
             .push(e.as_ref().map_or(0.0, |e| ms(e.extract)));
+        meta.tiles.push(e.as_ref().map_or_else(Vec::new, |e| {
+            e.tiles
+                .iter()
+                .map(|t| Tile {
+                    features: t.features as u32,
+                    area: t.area as f32,
+                    ms: ms(t.extract) as f32,
+                })
+                .collect()
+        }));
     }
     StoreWriter::new(MAGIC, VERSION)
         .json("meta", &meta)
@@ -335,6 +385,19 @@ mod tests {
             readable: vec![true, true],
             decode_ms: vec![1.0, 2.0],
             extract_ms: vec![3.0, 4.0],
+            grid: TileGrid::WHOLE,
+            tiles: vec![
+                vec![Tile {
+                    features: 1,
+                    area: 1.0,
+                    ms: 0.5,
+                }],
+                vec![Tile {
+                    features: 2,
+                    area: 1.0,
+                    ms: 0.5,
+                }],
+            ],
         };
         let data: Vec<f32> = (0..3 * DIM).map(|v| v as f32).collect();
         StoreWriter::new(MAGIC, VERSION)
@@ -350,6 +413,12 @@ mod tests {
         assert_eq!(set.image(0).unwrap().nrows(), 1);
         assert_eq!(set.image(1).unwrap()[[1, 0]], (2 * DIM) as f32);
         assert_eq!(set.extract_ms(1), 6.0);
+        // image 1 as a query: one tile of 0.5 ms, the rest fixed cost
+        let q = set.query(1, vec![7, 8]);
+        assert_eq!(
+            (q.tiles.len(), q.fixed_ms, q.full_extract_ms()),
+            (1, 5.5, 6.0)
+        );
         assert_eq!(set.owned_per_image().len(), 2);
         assert_eq!(set.keypoints(1).len(), 2);
         assert_eq!(set.keypoints(0)[0].size, 0.5);
@@ -382,6 +451,12 @@ mod tests {
             readable: vec![true],
             decode_ms: vec![0.0],
             extract_ms: vec![0.0],
+            grid: TileGrid::WHOLE,
+            tiles: vec![vec![Tile {
+                features: 1,
+                area: 1.0,
+                ms: 0.5,
+            }]],
         };
         let data = vec![0.5f32; DIM];
         let write = |meta: &DescriptorMeta| {
@@ -394,17 +469,37 @@ mod tests {
                 .unwrap();
         };
         write(&meta);
+        // Another tile grid: re-extracted.
+        let grid: TileGrid = "2x2".parse().unwrap();
+        assert!(descriptors(&path, &images, &ExtractConfig::default(), grid, "t").is_err());
+        write(&meta);
         // Same images and settings: served from the file.
-        let set = descriptors(&path, &images, &ExtractConfig::default(), "t").unwrap();
+        let set = descriptors(
+            &path,
+            &images,
+            &ExtractConfig::default(),
+            TileGrid::WHOLE,
+            "t",
+        )
+        .unwrap();
         assert_eq!(set.all().nrows(), 1);
         // Other settings: re-extracted, which fails on the fake image.
         let other = ExtractConfig {
             max_side: 320,
             ..ExtractConfig::default()
         };
-        assert!(descriptors(&path, &images, &other, "t").is_err());
+        assert!(descriptors(&path, &images, &other, TileGrid::WHOLE, "t").is_err());
         // Same settings but the image changed size: re-extracted too.
         std::fs::write(dir.path().join("x.jpg"), b"still not an image").unwrap();
-        assert!(descriptors(&path, &images, &ExtractConfig::default(), "t").is_err());
+        assert!(
+            descriptors(
+                &path,
+                &images,
+                &ExtractConfig::default(),
+                TileGrid::WHOLE,
+                "t"
+            )
+            .is_err()
+        );
     }
 }

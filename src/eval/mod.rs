@@ -22,11 +22,12 @@ pub mod recommend;
 pub mod summary;
 pub mod sweep;
 pub mod table;
+pub mod tiles;
 pub mod timing;
 pub mod verify;
 
 use crate::dataset::Dataset;
-use crate::features::ExtractConfig;
+use crate::features::{ExtractConfig, TileGrid};
 use crate::pipeline::progress_bar;
 use crate::vocabulary::Vocabulary;
 use crate::vocabulary::kmeans::KmeansConfig;
@@ -39,6 +40,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use summary::{QueryCost, SettingSummary};
 use sweep::{BASELINE, Calibration, RULE_GRIDS, RuleGrid};
+use tiles::Query;
 
 /// Quantization block, as the search uses by default.
 const BLOCK: usize = 32;
@@ -74,6 +76,10 @@ pub struct EvalConfig {
     /// recommended one.
     pub histogram: Option<String>,
     pub extract: ExtractConfig,
+    /// Streaming extraction's tile grid for the queries (the map images are
+    /// extracted whole). The full search is also run on the queries
+    /// extracted whole, to show what tiling changes.
+    pub tiles: TileGrid,
     /// Use this vocabulary instead of training one (its extraction settings win).
     pub vocab: Option<PathBuf>,
     pub out: PathBuf,
@@ -111,6 +117,8 @@ pub struct ConfigInfo {
     pub top_n: [usize; 3],
     pub tolerance: f64,
     pub extract: ExtractConfig,
+    /// The queries' tile grid, `COLSxROWS+MARGIN`.
+    pub tiles: String,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -163,6 +171,9 @@ pub struct Report {
     /// Features each rule needs at equal recall.
     pub equal_recall: Option<EqualRecall>,
     pub histogram: Option<HistogramInfo>,
+    /// The full search on the queries extracted whole (when they are tiled):
+    /// its time share is against the tiled full search.
+    pub whole_image: Option<SettingSummary>,
     /// The verification pass, when asked for.
     pub verification: Option<verify::VerificationReport>,
 }
@@ -201,6 +212,34 @@ fn pick_setting(summaries: &[SettingSummary], spec: &str, w: usize) -> anyhow::R
         .with_context(|| format!("--histogram {spec}: no such setting in the sweep"))
 }
 
+/// Quantize every query once (timed), as the sweep replays it.
+fn quantize_queries(
+    set: &cache::DescriptorSet,
+    quantizer: &dyn crate::quantize::Quantizer,
+    what: &str,
+) -> (Vec<Query>, Vec<QueryCost>) {
+    let bar = progress_bar(set.len() as u64, what);
+    let quantized: Vec<(Query, QueryCost)> = (0..set.len())
+        .into_par_iter()
+        .map(|q| {
+            let w = match set.image(q) {
+                Some(d) => timing::quantize_timed(quantizer, d, BLOCK),
+                None => timing::QueryWords {
+                    words: Vec::new(),
+                    quantize_ms_per_feature: 0.0,
+                },
+            };
+            bar.inc(1);
+            let cost = QueryCost {
+                quantize_ms_per_feature: w.quantize_ms_per_feature,
+            };
+            (set.query(q, w.words), cost)
+        })
+        .collect();
+    bar.finish_and_clear();
+    quantized.into_iter().unzip()
+}
+
 fn seconds_since(t: &mut Instant) -> f64 {
     let s = t.elapsed().as_secs_f64();
     *t = Instant::now();
@@ -233,14 +272,31 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         &config.cache.join("map.bowdesc"),
         &dataset.map,
         &extract,
+        TileGrid::WHOLE,
         "extracting map",
     )?;
     let query_desc = cache::descriptors(
-        &config.cache.join("queries.bowdesc"),
+        &config
+            .cache
+            .join(format!("queries-{}.bowdesc", config.tiles)),
         &dataset.queries,
         &extract,
+        config.tiles,
         "extracting queries",
     )?;
+    let whole_desc = (config.tiles != TileGrid::WHOLE)
+        .then(|| {
+            cache::descriptors(
+                &config
+                    .cache
+                    .join(format!("queries-{}.bowdesc", TileGrid::WHOLE)),
+                &dataset.queries,
+                &extract,
+                TileGrid::WHOLE,
+                "extracting whole queries",
+            )
+        })
+        .transpose()?;
     stages.extract_s = seconds_since(&mut clock);
 
     let vocab = match given_vocab {
@@ -259,32 +315,23 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     let map = cache::map_index(&config.cache, &vocab, &map_desc, &dataset.name)?;
     stages.map_s = seconds_since(&mut clock);
 
+    // one OpenCV thread per query: the sweep already runs one query per core
+    crate::features::set_opencv_threads(1);
     let quantizer = vocab.exact_quantizer();
-    let bar = progress_bar(dataset.queries.len() as u64, "quantizing queries");
-    let quantized: Vec<timing::QueryWords> = (0..query_desc.len())
-        .into_par_iter()
-        .map(|q| {
-            let words = match query_desc.image(q) {
-                Some(d) => timing::quantize_timed(&quantizer, d, BLOCK),
-                None => timing::QueryWords {
-                    words: Vec::new(),
-                    quantize_ms_per_feature: 0.0,
-                },
-            };
-            bar.inc(1);
-            words
-        })
-        .collect();
-    bar.finish_and_clear();
-    let costs: Vec<QueryCost> = quantized
-        .iter()
-        .enumerate()
-        .map(|(q, w)| QueryCost {
-            extract_ms: query_desc.extract_ms(q),
-            quantize_ms_per_feature: w.quantize_ms_per_feature,
-        })
-        .collect();
-    let words: Vec<Vec<u32>> = quantized.into_iter().map(|q| q.words).collect();
+    let (mut queries, costs) = quantize_queries(&query_desc, &quantizer, "quantizing queries");
+    // Geometric verification as the service does it: for the `verified`
+    // stop always, for re-ranking in the `+verify` settings.
+    let verify_params = config.verify.clone().unwrap_or_default();
+    let geometry = std::sync::Arc::new(tiles::Geometry {
+        fit: Box::new(crate::features::fit::OpenCvFit::new(verify_params.fit())),
+        params: verify_params.clone(),
+    });
+    for q in &mut queries {
+        q.geometry = Some(geometry.clone());
+    }
+    let whole = whole_desc
+        .as_ref()
+        .map(|d| quantize_queries(d, &quantizer, "quantizing whole queries"));
     stages.quantize_s = seconds_since(&mut clock);
 
     let calibrated = grids
@@ -295,8 +342,14 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         (calibrated * config.warmups.len() * config.targets.len()) as u64,
         "calibrating grids",
     );
-    let (mut settings, calibrations) =
-        sweep::plan(&map, &words, &grids, &config.warmups, &config.targets, &bar)?;
+    let (mut settings, calibrations) = sweep::plan(
+        &map,
+        &queries,
+        &grids,
+        &config.warmups,
+        &config.targets,
+        &bar,
+    )?;
     bar.finish_and_clear();
     let mut explicit = Vec::with_capacity(config.explicit.len());
     for spec in &config.explicit {
@@ -310,23 +363,49 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             });
         explicit.push(index);
     }
+    // With verification: the full search and each explicit setting again,
+    // re-ranked by geometric verification.
+    let mut verified_pairs = Vec::new();
+    if config.verify.is_some() {
+        let mut indices = vec![0];
+        indices.extend(explicit.iter().copied().filter(|&i| i != 0));
+        for i in indices {
+            let mut s = settings[i].clone();
+            s.verify = true;
+            settings.push(s);
+            verified_pairs.push((i, settings.len() - 1));
+        }
+    }
     stages.calibrate_s = seconds_since(&mut clock);
     tracing::info!(
         settings = settings.len(),
         runs = config.runs,
-        queries = words.len(),
+        queries = queries.len(),
         "sweeping"
     );
 
     let top_n = summary::TOP_N.iter().copied().max().unwrap_or(10);
-    let bar = progress_bar(words.len() as u64, "sweeping");
-    let outcomes = sweep::run_all(&map, &words, &settings, config.runs, top_n, &bar);
+    let bar = progress_bar(queries.len() as u64, "sweeping");
+    let outcomes = sweep::run_all(&map, &queries, &settings, config.runs, top_n, &bar);
     bar.finish_and_clear();
+    let tiles_total: Vec<usize> = queries.iter().map(|q| q.tiles.len().max(1)).collect();
+    let full_ms = summary::request_ms(&outcomes[0], &costs);
     let summaries: Vec<SettingSummary> = settings
         .par_iter()
         .zip(&outcomes)
-        .map(|(s, o)| summary::summarize(s, o, &dataset.truth, &costs))
+        .map(|(s, o)| summary::summarize(s, o, &dataset.truth, &costs, &tiles_total, &full_ms))
         .collect();
+    // The full search on the queries extracted whole: what tiling changes.
+    let whole_image = whole.map(|(queries, costs)| {
+        let bar = progress_bar(queries.len() as u64, "sweeping whole queries");
+        let o = sweep::run_all(&map, &queries, &settings[..1], config.runs, top_n, &bar);
+        bar.finish_and_clear();
+        let ones = vec![1; queries.len()];
+        let mut s =
+            summary::summarize(&settings[0], &o[0], &dataset.truth, &costs, &ones, &full_ms);
+        s.label = format!("{} (whole image)", s.label);
+        s
+    });
     stages.sweep_s = seconds_since(&mut clock);
 
     let recommendation = recommend::recommend(&summaries, config.tolerance);
@@ -355,49 +434,32 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         }
     });
 
-    let verification = match &config.verify {
-        None => None,
-        Some(params) => {
-            let fit = crate::features::fit::OpenCvFit::new(params.fit());
-            let queries: Vec<verify::QueryGeometry> = (0..query_desc.len())
-                .map(|q| {
-                    let keypoints = query_desc.keypoints(q);
-                    words[q].iter().copied().zip(keypoints).collect()
+    let verification = config
+        .verify
+        .as_ref()
+        .map(|params| verify::VerificationReport {
+            params: params.clone(),
+            rows: verified_pairs
+                .iter()
+                .map(|&(without, with)| {
+                    verify::row(
+                        &summaries[without].label,
+                        without,
+                        &outcomes[without],
+                        &outcomes[with],
+                        &dataset.truth,
+                    )
                 })
-                .collect();
-            let mut indices = vec![0];
-            indices.extend(explicit.iter().copied().filter(|&i| i != 0));
-            let bar = progress_bar(indices.len() as u64, "verifying");
-            let inputs = verify::Inputs {
-                map: &map,
-                queries: &queries,
-                truth: &dataset.truth,
-            };
-            let rows = indices
-                .into_iter()
-                .map(|i| {
-                    let row = verify::verify_setting(
-                        &inputs,
-                        &summaries[i].label,
-                        i,
-                        &outcomes[i],
-                        &fit,
-                        params,
-                    );
-                    bar.inc(1);
-                    row
-                })
-                .collect();
-            bar.finish_and_clear();
-            Some(verify::VerificationReport {
-                params: params.clone(),
-                rows,
-            })
-        }
-    };
+                .collect(),
+        });
     stages.verify_s = seconds_since(&mut clock);
 
-    let mean_features = metrics::mean(&words.iter().map(|w| w.len() as f64).collect::<Vec<_>>());
+    let mean_features = metrics::mean(
+        &queries
+            .iter()
+            .map(|q| q.words.len() as f64)
+            .collect::<Vec<_>>(),
+    );
     stages.total_s = started.elapsed().as_secs_f64();
     let report = Report {
         command: config.command.clone(),
@@ -420,6 +482,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             top_n: summary::TOP_N,
             tolerance: config.tolerance,
             extract,
+            tiles: config.tiles.to_string(),
         },
         vocabulary: VocabularyInfo {
             words: vocab.words(),
@@ -432,6 +495,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         recommendation,
         equal_recall,
         histogram,
+        whole_image,
         verification,
     };
     write_outputs(&report, &config.out, config.plots)?;

@@ -43,13 +43,61 @@ pub struct RunMetrics {
     pub fraction: f64,
 }
 
-/// What the evaluation needs to know about each query besides its answers.
+/// What the evaluation needs to know about each query besides its answers
+/// (its extraction cost comes with each outcome: it depends on the tiles
+/// extracted).
 #[derive(Debug, Clone, Copy)]
 pub struct QueryCost {
-    /// Decode + extract time, in milliseconds.
-    pub extract_ms: f64,
     /// Quantization time per feature, in milliseconds.
     pub quantize_ms_per_feature: f64,
+}
+
+/// A query's request time under one outcome: decoding and extracting the
+/// tiles extracted, quantizing and voting the features used, in milliseconds.
+pub fn stage_sample(o: &Outcome, c: &QueryCost) -> StageSample {
+    StageSample {
+        extract: o.extract_ms as f64,
+        quantize: c.quantize_ms_per_feature * o.used as f64,
+        vote: o.vote_ms as f64,
+        verify: o.verify_ms as f64,
+    }
+}
+
+/// Request time of every outcome `runs[run][query]`, in milliseconds.
+pub fn request_ms(runs: &[Vec<Outcome>], costs: &[QueryCost]) -> Vec<Vec<f64>> {
+    runs.iter()
+        .map(|r| {
+            r.iter()
+                .zip(costs)
+                .map(|(o, c)| stage_sample(o, c).total())
+                .collect()
+        })
+        .collect()
+}
+
+/// A setting's request time as a fraction of the full search's, query by
+/// query in the same run: mean and median over queries × runs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct TimeShare {
+    pub mean: f64,
+    pub median: f64,
+}
+
+impl TimeShare {
+    /// `ms[run][query]` against the full search's `full[run][query]`.
+    pub fn of(ms: &[Vec<f64>], full: &[Vec<f64>]) -> Self {
+        let ratios: Vec<f64> = ms
+            .iter()
+            .zip(full)
+            .flat_map(|(a, b)| a.iter().zip(b))
+            .filter(|(_, b)| **b > 0.0)
+            .map(|(a, b)| a / b)
+            .collect();
+        Self {
+            mean: metrics::mean(&ratios),
+            median: timing::quantiles(&ratios).median,
+        }
+    }
 }
 
 /// Everything reported for one setting.
@@ -64,6 +112,10 @@ pub struct SettingSummary {
     pub fraction: Stat,
     /// Per-query stage times over all queries and runs, in milliseconds.
     pub time_ms: StageTimes,
+    /// Request time as a fraction of the full search's on the same query.
+    pub time_share: TimeShare,
+    /// Mean fraction of the image's tiles extracted.
+    pub tiles: f64,
     pub runs: Vec<RunMetrics>,
 }
 
@@ -94,6 +146,7 @@ impl SettingSummary {
             rule: crate::search::RuleSpec::new(rule, parameter).expect("a valid rule"),
             min_features,
             target: None,
+            verify: false,
         };
         let stat = |mean| Stat { mean, std: 0.0 };
         Self {
@@ -104,6 +157,8 @@ impl SettingSummary {
             recall_at_5: stat(recall_at_1),
             fraction: stat(fraction),
             time_ms: StageTimes::default(),
+            time_share: TimeShare::default(),
+            tiles: 1.0,
             runs: vec![],
         }
     }
@@ -136,6 +191,8 @@ pub fn summarize(
     runs: &[Vec<Outcome>],
     truth: &[HashSet<u32>],
     costs: &[QueryCost],
+    tiles_total: &[usize],
+    full_ms: &[Vec<f64>],
 ) -> SettingSummary {
     let per_run: Vec<RunMetrics> = runs.iter().map(|r| run_metrics(r, truth)).collect();
     let over =
@@ -143,11 +200,12 @@ pub fn summarize(
     let samples: Vec<StageSample> = runs
         .iter()
         .flat_map(|r| r.iter().zip(costs))
-        .map(|(o, c)| StageSample {
-            extract: c.extract_ms,
-            quantize: c.quantize_ms_per_feature * o.used as f64,
-            vote: o.vote_ms as f64,
-        })
+        .map(|(o, c)| stage_sample(o, c))
+        .collect();
+    let tile_shares: Vec<f64> = runs
+        .iter()
+        .flat_map(|r| r.iter().zip(tiles_total))
+        .map(|(o, &n)| o.tiles as f64 / n.max(1) as f64)
         .collect();
     SettingSummary {
         setting: setting.clone(),
@@ -157,6 +215,8 @@ pub fn summarize(
         recall_at_5: over(&|m| m.recall_at_5),
         fraction: over(&|m| m.fraction),
         time_ms: timing::summarize(&samples),
+        time_share: TimeShare::of(&request_ms(runs, costs), full_ms),
+        tiles: metrics::mean(&tile_shares),
         runs: per_run,
     }
 }
@@ -180,6 +240,10 @@ mod tests {
             used,
             total: 100,
             vote_ms: 1.0,
+            extract_ms: 10.0,
+            verify_ms: 0.0,
+            tiles: 1,
+            verified: false,
         }
     }
 
@@ -197,12 +261,14 @@ mod tests {
             rule: RuleSpec::new("none", None).unwrap(),
             min_features: 0,
             target: None,
+            verify: false,
         };
         let costs = [QueryCost {
-            extract_ms: 10.0,
             quantize_ms_per_feature: 0.1,
         }; 2];
-        let s = summarize(&setting, &runs, &truth, &costs);
+        // the full search took 21 ms on every query (10 + 100 × 0.1 + 1)
+        let full = vec![vec![21.0; 2]; 2];
+        let s = summarize(&setting, &runs, &truth, &costs, &[1, 1], &full);
         assert_eq!(s.runs[0].recall90, [1.0; 3]);
         assert_eq!(s.runs[1].recall90, [0.0; 3]);
         assert_eq!(s.recall90_at(5).mean, 0.5);
@@ -214,6 +280,9 @@ mod tests {
         // Quantize time is charged per feature used: 20..100 features.
         assert_eq!(s.time_ms.quantize.p95, 10.0);
         assert_eq!(s.time_ms.extract.median, 10.0);
+        // 50 features: 10 + 5 + 1 = 16 ms, 16/21 of the full search
+        assert!((s.time_share.mean - (16.0 + 14.0 + 21.0 + 13.0) / 4.0 / 21.0).abs() < 1e-12);
+        assert_eq!(s.tiles, 1.0);
         assert_eq!(fractions(&runs), [0.5, 0.3, 1.0, 0.2]);
     }
 }

@@ -3,6 +3,7 @@
 //! found for a dataset, and running every setting over every Monte Carlo run
 //! and query on pre-quantized words.
 
+use super::tiles::Query;
 use crate::index::MapIndex;
 use crate::search::{Ranked, RuleSpec, SearchOptions, search_words};
 use indicatif::ProgressBar;
@@ -81,6 +82,10 @@ pub const RULE_GRIDS: &[RuleGrid] = &[
         rule: "confident",
         grid: Grid::Values(&[0.1, 0.05, 0.01]),
     },
+    RuleGrid {
+        rule: "verified",
+        grid: Grid::Values(&[8.0, 12.0, 16.0, 24.0]),
+    },
 ];
 
 /// Range searched when calibrating a rule's parameter: the calibrated grid's
@@ -108,6 +113,8 @@ pub struct Setting {
     pub min_features: usize,
     /// The fraction of features its parameter was calibrated for, if any.
     pub target: Option<f64>,
+    /// Candidates re-ranked by geometric verification.
+    pub verify: bool,
 }
 
 impl Setting {
@@ -124,6 +131,9 @@ impl Setting {
         }
         if self.min_features > 0 {
             s += &format!(" w={}", self.min_features);
+        }
+        if self.verify {
+            s += " +verify";
         }
         s
     }
@@ -163,8 +173,10 @@ pub fn parse_setting(spec: &str, warmup: usize) -> anyhow::Result<Setting> {
         ),
         None => (body.trim(), None),
     };
+    let rule = RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?;
     Ok(Setting {
-        rule: RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?,
+        verify: rule.info().geometric,
+        rule,
         min_features,
         target: None,
     })
@@ -203,6 +215,14 @@ pub struct Outcome {
     pub total: u32,
     /// Time spent voting (and checking the rule), in milliseconds.
     pub vote_ms: f32,
+    /// Decoding and extracting the tiles extracted, in milliseconds.
+    pub extract_ms: f32,
+    /// Verifying the candidates after the search, in milliseconds.
+    pub verify_ms: f32,
+    /// Tiles extracted (1 for a query extracted whole).
+    pub tiles: u16,
+    /// The best candidate is geometrically verified.
+    pub verified: bool,
 }
 
 impl Outcome {
@@ -216,6 +236,7 @@ impl Outcome {
     }
 }
 
+/// One search of a query known by its words, extracted whole at no cost.
 pub fn search_one(
     map: &MapIndex,
     words: &[u32],
@@ -227,17 +248,42 @@ pub fn search_one(
     Outcome {
         candidates: o.candidates,
         used: o.features_used as u32,
-        total: o.features_total as u32,
+        total: words.len() as u32,
         vote_ms: o.timings.vote.as_secs_f32() * 1e3,
+        extract_ms: 0.0,
+        verify_ms: 0.0,
+        tiles: 1,
+        verified: false,
+    }
+}
+
+/// One search of a cached query, its tiles streamed as the service would.
+pub fn search_query(
+    map: &MapIndex,
+    query: &Query,
+    setting: &Setting,
+    seed: u64,
+    top_n: usize,
+) -> Outcome {
+    let r = query.search(map, &setting.options(seed, top_n), setting.verify);
+    Outcome {
+        candidates: r.outcome.candidates,
+        used: r.outcome.features_used as u32,
+        total: query.words.len() as u32,
+        vote_ms: r.outcome.timings.vote.as_secs_f32() * 1e3,
+        extract_ms: r.extract_ms as f32,
+        verify_ms: r.verify_ms as f32,
+        tiles: r.tiles as u16,
+        verified: r.verified,
     }
 }
 
 /// Mean fraction of features `setting` uses over all queries in `run`.
-pub fn mean_fraction(map: &MapIndex, queries: &[Vec<u32>], setting: &Setting, run: u32) -> f64 {
+pub fn mean_fraction(map: &MapIndex, queries: &[Query], setting: &Setting, run: u32) -> f64 {
     let total: f64 = queries
         .par_iter()
         .enumerate()
-        .map(|(q, words)| search_one(map, words, setting, seed(run, q), 1).fraction())
+        .map(|(q, query)| search_query(map, query, setting, seed(run, q), 1).fraction())
         .sum();
     total / queries.len().max(1) as f64
 }
@@ -333,7 +379,7 @@ pub fn bisect_edge(
 /// from one calibration run over all queries.
 pub fn calibrate(
     map: &MapIndex,
-    queries: &[Vec<u32>],
+    queries: &[Query],
     rule: &str,
     (lo, hi, whole): (f64, f64, bool),
     min_features: usize,
@@ -345,6 +391,7 @@ pub fn calibrate(
             rule: RuleSpec::new(rule, Some(p)).map_err(anyhow::Error::msg)?,
             min_features,
             target: None,
+            verify: false,
         })
     };
     setting(lo)?;
@@ -379,7 +426,7 @@ pub fn calibrate(
 /// warm-up, calibrated grids at every warm-up. Also returns the calibrations.
 pub fn plan(
     map: &MapIndex,
-    queries: &[Vec<u32>],
+    queries: &[Query],
     grids: &[&RuleGrid],
     warmups: &[usize],
     targets: &[f64],
@@ -391,15 +438,21 @@ pub fn plan(
     let spec = |name: &str, p: Option<f64>| RuleSpec::new(name, p).map_err(anyhow::Error::msg);
     for g in grids {
         match g.grid {
-            Grid::Single => settings.push(Setting {
-                rule: spec(g.rule, None)?,
-                min_features: first,
-                target: None,
-            }),
+            Grid::Single => {
+                let rule = spec(g.rule, None)?;
+                settings.push(Setting {
+                    verify: rule.info().geometric,
+                    rule,
+                    min_features: first,
+                    target: None,
+                })
+            }
             Grid::Values(values) => {
                 for &v in values {
+                    let rule = spec(g.rule, Some(v))?;
                     settings.push(Setting {
-                        rule: spec(g.rule, Some(v))?,
+                        verify: rule.info().geometric,
+                        rule,
                         min_features: first,
                         target: None,
                     });
@@ -418,6 +471,7 @@ pub fn plan(
                             rule: spec(g.rule, Some(c.parameter))?,
                             min_features: w,
                             target: Some(c.target),
+                            verify: false,
                         });
                     }
                     calibrations.extend(found);
@@ -431,7 +485,7 @@ pub fn plan(
 /// Run every setting on every query in every run: `result[setting][run][query]`.
 pub fn run_all(
     map: &MapIndex,
-    queries: &[Vec<u32>],
+    queries: &[Query],
     settings: &[Setting],
     runs: u32,
     top_n: usize,
@@ -440,11 +494,11 @@ pub fn run_all(
     let per_query: Vec<Vec<Outcome>> = queries
         .par_iter()
         .enumerate()
-        .map(|(q, words)| {
+        .map(|(q, query)| {
             let mut out = Vec::with_capacity(settings.len() * runs as usize);
             for s in settings {
                 for run in 0..runs {
-                    out.push(search_one(map, words, s, seed(run, q), top_n));
+                    out.push(search_query(map, query, s, seed(run, q), top_n));
                 }
             }
             bar.inc(1);
@@ -546,19 +600,21 @@ mod tests {
     #[test]
     fn fixed_fraction_uses_that_share_and_runs_are_laid_out_by_setting() {
         let map = toy_map();
-        let queries: Vec<Vec<u32>> = (0..5)
-            .map(|q| (0..40).map(|i| ((i * 7 + q) % 8) as u32).collect())
+        let queries: Vec<Query> = (0..5)
+            .map(|q| Query::whole((0..40).map(|i| ((i * 7 + q) % 8) as u32).collect()))
             .collect();
         let settings = vec![
             Setting {
                 rule: RuleSpec::new("none", None).unwrap(),
                 min_features: 0,
                 target: None,
+                verify: false,
             },
             Setting {
                 rule: RuleSpec::new("fixed", Some(0.5)).unwrap(),
                 min_features: 0,
                 target: None,
+                verify: false,
             },
         ];
         let bar = ProgressBar::hidden();
@@ -576,11 +632,13 @@ mod tests {
     #[test]
     fn calibration_hits_reachable_targets_of_a_real_rule() {
         let map = toy_map();
-        let queries: Vec<Vec<u32>> = (0..6)
+        let queries: Vec<Query> = (0..6)
             .map(|q| {
-                (0..200)
-                    .map(|i| ((i * 5 + q * 3 + i / 7) % 8) as u32)
-                    .collect()
+                Query::whole(
+                    (0..200)
+                        .map(|i| ((i * 5 + q * 3 + i / 7) % 8) as u32)
+                        .collect(),
+                )
             })
             .collect();
         let bar = ProgressBar::hidden();

@@ -80,6 +80,15 @@ pub struct StageSample {
     pub extract: f64,
     pub quantize: f64,
     pub vote: f64,
+    /// Re-ranking by geometric verification (0 without).
+    pub verify: f64,
+}
+
+impl StageSample {
+    /// The request's time: every stage.
+    pub fn total(&self) -> f64 {
+        self.extract + self.quantize + self.vote + self.verify
+    }
 }
 
 /// Quantiles of each stage and of their sum, in milliseconds.
@@ -88,6 +97,7 @@ pub struct StageTimes {
     pub extract: Quantiles,
     pub quantize: Quantiles,
     pub vote: Quantiles,
+    pub verify: Quantiles,
     /// Quantize + vote: the part the stopping rule saves.
     pub search: Quantiles,
     pub total: Quantiles,
@@ -100,8 +110,9 @@ pub fn summarize(samples: &[StageSample]) -> StageTimes {
         extract: of(|s| s.extract),
         quantize: of(|s| s.quantize),
         vote: of(|s| s.vote),
+        verify: of(|s| s.verify),
         search: of(|s| s.quantize + s.vote),
-        total: of(|s| s.extract + s.quantize + s.vote),
+        total: of(StageSample::total),
     }
 }
 
@@ -135,11 +146,13 @@ mod tests {
                 extract: 1.0,
                 quantize: 2.0,
                 vote: 3.0,
+                verify: 0.0,
             },
             StageSample {
                 extract: 10.0,
                 quantize: 20.0,
                 vote: 30.0,
+                verify: 0.0,
             },
         ]);
         assert_eq!(

@@ -1,21 +1,17 @@
-//! The evaluation's verification pass: the answers of a setting re-ranked by
-//! geometric verification ([`crate::geometry::verify`]), each query verified
-//! against the features its search used, and the recalls with and without
-//! it side by side, with what verification cost per query.
+//! The evaluation's verification table: a setting run again with its
+//! answers re-ranked by geometric verification ([`crate::geometry::verify`],
+//! each query verified against the features its search used, in the sweep),
+//! and the recalls with and without it side by side, with what verification
+//! cost per query.
 
 use super::metrics::{self, Answer};
 use super::summary::PRECISION;
 use super::summary::Stat;
-use super::sweep::{Outcome, seed};
+use super::sweep::Outcome;
 use super::timing::{self, Quantiles};
-use crate::geometry::Keypoint;
-use crate::geometry::verify::{ModelFit, VerifyParams, rerank};
-use crate::index::MapIndex;
-use crate::search::{Ranked, permute};
-use rayon::prelude::*;
+use crate::geometry::verify::VerifyParams;
 use serde::Serialize;
 use std::collections::HashSet;
-use std::time::Instant;
 
 /// Recalls of one set of answers, over runs.
 #[derive(Debug, Clone, Copy, Serialize)]
@@ -81,98 +77,26 @@ fn recalls(runs: &[Vec<Outcome>], truth: &[HashSet<u32>]) -> Recalls {
     }
 }
 
-/// A query's features as verification takes them: (word, keypoint) in the
-/// original feature order.
-pub type QueryGeometry = Vec<(u32, Keypoint)>;
-
-/// One query's verified answer and what it cost.
-struct Verified {
-    outcome: Outcome,
-    ms: f64,
-    top_verified: bool,
-}
-
-fn verify_one(
-    map: &MapIndex,
-    query: &QueryGeometry,
-    outcome: &Outcome,
-    seed: u64,
-    fit: &dyn ModelFit,
-    params: &VerifyParams,
-) -> Verified {
-    let started = Instant::now();
-    let order = permute::permutation(query.len(), seed);
-    let seen: Vec<(u32, Keypoint)> = order[..(outcome.used as usize).min(order.len())]
-        .iter()
-        .map(|&i| query[i as usize])
-        .collect();
-    let votes: Vec<(u32, f32)> = outcome.candidates.iter().map(|r| (r.id, r.score)).collect();
-    let reranked = rerank(map, &votes, &seen, fit, params);
-    let ms = started.elapsed().as_secs_f64() * 1e3;
-    Verified {
-        outcome: Outcome {
-            candidates: reranked
-                .iter()
-                .map(|r| Ranked {
-                    id: r.id,
-                    score: r.score(),
-                })
-                .collect(),
-            ..outcome.clone()
-        },
-        ms,
-        top_verified: reranked
-            .first()
-            .and_then(|r| r.verification)
-            .is_some_and(|v| v.verified),
-    }
-}
-
-/// What every setting's verification needs: the map, each query's features
-/// (`queries[q]` holds every feature of query q, in the order the sweep's
-/// words came in) and the ground truth.
-pub struct Inputs<'a> {
-    pub map: &'a MapIndex,
-    pub queries: &'a [QueryGeometry],
-    pub truth: &'a [HashSet<u32>],
-}
-
-/// Verify the answers `runs[run][query]` of the setting at `index` (named
-/// `label`) and compare.
-pub fn verify_setting(
-    inputs: &Inputs<'_>,
+/// The row of a setting run without (`without[run][query]`) and with
+/// (`with`) geometric re-ranking: recalls side by side, what verifying cost
+/// and how often the best candidate was verified (and right).
+pub fn row(
     label: &str,
     index: usize,
-    runs: &[Vec<Outcome>],
-    fit: &dyn ModelFit,
-    params: &VerifyParams,
+    without: &[Vec<Outcome>],
+    with: &[Vec<Outcome>],
+    truth: &[HashSet<u32>],
 ) -> VerifiedRow {
-    let (map, queries, truth) = (inputs.map, inputs.queries, inputs.truth);
-    let verified: Vec<Vec<Verified>> = runs
-        .iter()
-        .enumerate()
-        .map(|(run, outcomes)| {
-            outcomes
-                .par_iter()
-                .enumerate()
-                .map(|(q, o)| verify_one(map, &queries[q], o, seed(run as u32, q), fit, params))
-                .collect()
-        })
-        .collect();
-    let ms: Vec<f64> = verified.iter().flatten().map(|v| v.ms).collect();
-    let shares: Vec<(f64, f64)> = verified
+    let ms: Vec<f64> = with.iter().flatten().map(|o| o.verify_ms as f64).collect();
+    let shares: Vec<(f64, f64)> = with
         .iter()
         .map(|run| {
             let tops: Vec<(bool, bool)> = run
                 .iter()
                 .zip(truth)
-                .map(|(v, t)| {
-                    let right = v
-                        .outcome
-                        .candidates
-                        .first()
-                        .is_some_and(|c| t.contains(&c.id));
-                    (v.top_verified, right)
+                .map(|(o, t)| {
+                    let right = o.candidates.first().is_some_and(|c| t.contains(&c.id));
+                    (o.verified, right)
                 })
                 .collect();
             let n_verified = tops.iter().filter(|t| t.0).count();
@@ -183,15 +107,11 @@ pub fn verify_setting(
             )
         })
         .collect();
-    let outcomes: Vec<Vec<Outcome>> = verified
-        .into_iter()
-        .map(|run| run.into_iter().map(|v| v.outcome).collect())
-        .collect();
     VerifiedRow {
         label: label.to_owned(),
         setting: index,
-        without: recalls(runs, truth),
-        with: recalls(&outcomes, truth),
+        without: recalls(without, truth),
+        with: recalls(with, truth),
         verify_ms: timing::quantiles(&ms),
         verified_share: Stat::of(&shares.iter().map(|s| s.0).collect::<Vec<_>>()),
         verified_precision: Stat::of(&shares.iter().map(|s| s.1).collect::<Vec<_>>()),

@@ -10,6 +10,7 @@ use super::Keypoint;
 use super::matches::{Correspondences, QueryFeatures, tentative};
 use super::packed::PackedFeature;
 use crate::index::MapIndex;
+use crate::search::LeaderCheck;
 use serde::{Deserialize, Serialize};
 
 /// The geometric model fitted to the correspondences.
@@ -128,7 +129,7 @@ impl Default for VerifyParams {
             estimator: Estimator::Magsac,
             threshold_px: 8.0,
             confidence: 0.995,
-            max_iters: 2000,
+            max_iters: 500,
         }
     }
 }
@@ -225,8 +226,10 @@ pub fn count_inliers(c: &Correspondences, fit: &dyn ModelFit, min_inliers: usize
         inliers: 0,
         verified: false,
     };
+    // fewer matches than the model needs, or than a verified candidate has
+    // inliers: no fit can verify it, so none is run
     let needed = fit.params().model.min_matches();
-    if matches < needed
+    if matches < needed.max(min_inliers)
         || distinct(c.query.iter().copied()) < needed
         || distinct(c.map.iter().copied()) < needed
     {
@@ -289,6 +292,32 @@ pub fn verify_leader(
 }
 
 /// One candidate after re-ranking.
+/// The `verified` stop's check (a [`LeaderCheck`]): a map image against
+/// the query features voted so far, verified as the final answer is.
+/// `keypoints` holds every feature given to the search, by feature number.
+pub struct LeaderVerifier<'a> {
+    pub map: &'a MapIndex,
+    pub fit: &'a dyn ModelFit,
+    pub params: &'a VerifyParams,
+    pub keypoints: &'a [Keypoint],
+}
+
+impl LeaderCheck for LeaderVerifier<'_> {
+    fn inliers(&mut self, image: u32, voted: &[(u32, u32)]) -> usize {
+        let query = with_keypoints(voted, self.keypoints);
+        verify_leader(self.map, image, &query, self.fit, self.params).inliers
+    }
+}
+
+/// The features voted, as (word, keypoint): `voted` holds (feature number,
+/// word) pairs, `keypoints` every feature's keypoint by number.
+pub fn with_keypoints(voted: &[(u32, u32)], keypoints: &[Keypoint]) -> Vec<(u32, Keypoint)> {
+    voted
+        .iter()
+        .filter_map(|&(i, w)| keypoints.get(i as usize).map(|k| (w, *k)))
+        .collect()
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Reranked {
     pub id: u32,

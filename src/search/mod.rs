@@ -22,7 +22,7 @@ pub mod stop;
 pub mod vote;
 
 pub use rank::Ranked;
-pub use stop::{RuleSpec, StopRule};
+pub use stop::{LeaderCheck, RuleSpec, StopRule};
 pub use vote::{Needs, Tally, Voter};
 
 use crate::index::MapIndex;
@@ -190,7 +190,18 @@ impl<'m> Search<'m> {
     /// seed. `quantize(indices, words)` fills `words[..indices.len()]` with
     /// the words of the batch's features at `indices` (numbered in the batch
     /// from 0). Returns whether the search has stopped.
-    pub fn feed(&mut self, count: usize, mut quantize: impl FnMut(&[u32], &mut [u32])) -> bool {
+    pub fn feed(&mut self, count: usize, quantize: impl FnMut(&[u32], &mut [u32])) -> bool {
+        self.feed_checked(count, quantize, None)
+    }
+
+    /// [`feed`](Self::feed), with a geometric check of candidates for rules
+    /// that use one (`verified`).
+    pub fn feed_checked(
+        &mut self,
+        count: usize,
+        mut quantize: impl FnMut(&[u32], &mut [u32]),
+        mut leader_check: Option<&mut dyn LeaderCheck>,
+    ) -> bool {
         if self.stopped() {
             return true;
         }
@@ -212,7 +223,13 @@ impl<'m> Search<'m> {
                 self.voter.vote(w);
                 self.voted.push((offset + i, w));
                 if self.voter.tally().features >= self.options.min_features
-                    && let Some(why) = self.rule.check(&self.voter)
+                    && let Some(why) = self.rule.check_with(
+                        &self.voter,
+                        &self.voted,
+                        leader_check
+                            .as_mut()
+                            .map(|c| &mut **c as &mut dyn LeaderCheck),
+                    )
                 {
                     self.stop = Some((StopKind::Rule, why));
                     break;
@@ -224,6 +241,28 @@ impl<'m> Search<'m> {
             }
         }
         false
+    }
+
+    /// Feed the features of one tile of a streamed image: `count` features,
+    /// after which `share` of the image (by area, in (0, 1]) has been
+    /// extracted; `last` when no tile is left, so N becomes known. N is
+    /// estimated meanwhile as the features so far over the share extracted.
+    /// Returns whether the search has stopped.
+    pub fn feed_tile(
+        &mut self,
+        count: usize,
+        share: f64,
+        last: bool,
+        quantize: impl FnMut(&[u32], &mut [u32]),
+        leader_check: Option<&mut dyn LeaderCheck>,
+    ) -> bool {
+        let fed = self.fed + count;
+        if last {
+            self.set_total(fed);
+        } else {
+            self.set_expected_total(fed as f64 / share.max(1e-9));
+        }
+        self.feed_checked(count, quantize, leader_check)
     }
 
     /// Rank the candidates and say why the search ended.
@@ -266,14 +305,60 @@ pub fn feed_descriptors(
     quantizer: &dyn Quantizer,
     descriptors: ArrayView2<'_, f32>,
 ) -> bool {
-    let dim = descriptors.ncols();
-    let mut block = Array2::<f32>::zeros((search.options.block.max(1), dim));
-    search.feed(descriptors.nrows(), |indices, words| {
-        for (mut dst, &i) in block.rows_mut().into_iter().zip(indices) {
+    search.feed(
+        descriptors.nrows(),
+        descriptor_quantizer(quantizer, descriptors, search.options.block),
+    )
+}
+
+/// A `quantize(indices, words)` callback over rows of `descriptors`, copying
+/// each block of permuted rows into one buffer for the quantizer.
+pub fn descriptor_quantizer<'q>(
+    quantizer: &'q dyn Quantizer,
+    descriptors: ArrayView2<'q, f32>,
+    block: usize,
+) -> impl FnMut(&[u32], &mut [u32]) + 'q {
+    let mut buffer = Array2::<f32>::zeros((block.max(1), descriptors.ncols()));
+    move |indices, words| {
+        for (mut dst, &i) in buffer.rows_mut().into_iter().zip(indices) {
             dst.assign(&descriptors.row(i as usize));
         }
-        quantizer.quantize(block.slice(ndarray::s![..indices.len(), ..]), words);
-    })
+        quantizer.quantize(buffer.slice(ndarray::s![..indices.len(), ..]), words);
+    }
+}
+
+/// Stream an image's tiles through a search, tiles given as their features'
+/// words in extraction order with the image share each one covers: what
+/// the service does with real tiles, on words known in advance (used by
+/// evaluation). Returns the outcome, the (feature number, word) pairs voted
+/// and the tiles extracted.
+pub fn search_tiles(
+    map: &MapIndex,
+    tiles: &[(&[u32], f64)],
+    options: &SearchOptions,
+    mut leader_check: Option<&mut dyn LeaderCheck>,
+) -> (SearchOutcome, Vec<(u32, u32)>, usize) {
+    let mut s = Search::new(map, options);
+    let mut share = 0.0;
+    let mut used = 0;
+    for (k, &(words, area)) in tiles.iter().enumerate() {
+        share += area;
+        used += 1;
+        let last = k + 1 == tiles.len();
+        let quantize = |indices: &[u32], out: &mut [u32]| {
+            for (o, &i) in out.iter_mut().zip(indices) {
+                *o = words[i as usize];
+            }
+        };
+        let check = leader_check
+            .as_mut()
+            .map(|c| &mut **c as &mut dyn LeaderCheck);
+        if s.feed_tile(words.len(), share, last, quantize, check) {
+            break;
+        }
+    }
+    let voted = s.voted.clone();
+    (s.finish(), voted, used)
 }
 
 /// Search over words already known: feature i quantizes to `words[i]`. Gives

@@ -12,6 +12,16 @@ pub fn permutation(n: usize, seed: u64) -> Vec<u32> {
     order
 }
 
+/// Salt of the tile order's seed, so the order of the tiles and the order of
+/// the features inside the first tile are not drawn from the same stream.
+const TILE_ORDER_SALT: u64 = 0x7469_6c65_6f72_6465;
+
+/// The order in which an image's `n` tiles are extracted, determined by the
+/// search's seed.
+pub fn tile_order(n: usize, seed: u64) -> Vec<u32> {
+    permutation(n, seed ^ TILE_ORDER_SALT)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -40,6 +40,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "confident",
     parameter: Some("delta"),
     about: "stop when the leader wins with probability ≥ 1 − δ (Bernstein–Serfling, anytime)",
+    geometric: false,
     make: |d, _| Ok(Box::new(Confident(unit_interval("delta", d, false)?))),
 };
 

@@ -9,6 +9,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "fixed",
     parameter: Some("fraction"),
     about: "stop after a fixed fraction f of the features",
+    geometric: false,
     make: |f, _| Ok(Box::new(Fixed(unit_interval("fraction", f, true)?))),
 };
 

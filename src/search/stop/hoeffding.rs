@@ -9,6 +9,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "hoeffding",
     parameter: Some("delta"),
     about: "stop when the top-2 gap of mean votes ≥ √(2·ln(2/δ)/t)",
+    geometric: false,
     make: |d, _| Ok(Box::new(Hoeffding(unit_interval("delta", d, false)?))),
 };
 

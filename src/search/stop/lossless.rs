@@ -25,6 +25,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "lossless",
     parameter: None,
     about: "stop when the remaining features cannot change the top-n answer",
+    geometric: false,
     make: |_, ctx: &RuleContext| {
         Ok(Box::new(Lossless {
             n: ctx.top_n.max(1),

@@ -11,6 +11,7 @@ mod none;
 mod peak_mean;
 mod relative;
 mod stable_peak;
+mod verified;
 
 use super::vote::{Needs, Voter};
 use serde::{Deserialize, Serialize};
@@ -24,6 +25,27 @@ pub trait StopRule: Send {
     fn needs(&self) -> Needs {
         Needs::default()
     }
+
+    /// [`check`](Self::check) with what a geometric rule needs besides the
+    /// votes: the (feature, word) pairs voted so far and a way to check a
+    /// candidate against them. Vote rules ignore both.
+    fn check_with(
+        &mut self,
+        voter: &Voter<'_>,
+        voted: &[(u32, u32)],
+        leader_check: Option<&mut dyn LeaderCheck>,
+    ) -> Option<String> {
+        let _ = (voted, leader_check);
+        self.check(voter)
+    }
+}
+
+/// A geometric check of a map image against the query features voted so
+/// far, given as (feature number, word) pairs: how many of them are inliers
+/// of a model relating the two images. Implemented outside the core (the
+/// model fit is OpenCV's).
+pub trait LeaderCheck {
+    fn inliers(&mut self, image: u32, voted: &[(u32, u32)]) -> usize;
 }
 
 /// What a rule may know about the search it runs in.
@@ -50,6 +72,9 @@ pub struct RuleInfo {
     pub parameter: Option<&'static str>,
     /// One line for help texts.
     pub about: &'static str,
+    /// Whether the rule verifies candidates geometrically (it needs a
+    /// [`LeaderCheck`], and its answers are re-ranked by verification).
+    pub geometric: bool,
     /// Check a parameter value and build an instance.
     pub make: MakeRule,
 }
@@ -64,6 +89,7 @@ pub const RULES: &[RuleInfo] = &[
     fixed::INFO,
     lossless::INFO,
     confident::INFO,
+    verified::INFO,
 ];
 
 /// Look a rule up by name.

@@ -7,6 +7,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "none",
     parameter: None,
     about: "full bag-of-words: quantize every feature",
+    geometric: false,
     make: |_, _| Ok(Box::new(NoStop)),
 };
 

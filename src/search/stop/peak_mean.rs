@@ -12,6 +12,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "peak-mean",
     parameter: Some("threshold"),
     about: "rule 1: stop when max(h) − mean(h) > T",
+    geometric: false,
     make: |t, _| Ok(Box::new(PeakMean(non_negative("threshold", t)?))),
 };
 

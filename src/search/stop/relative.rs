@@ -7,6 +7,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "relative",
     parameter: Some("threshold"),
     about: "rule 2: stop when (max(h) − mean(h)) / mean(h) > T",
+    geometric: false,
     make: |t, _| Ok(Box::new(Relative(non_negative("threshold", t)?))),
 };
 

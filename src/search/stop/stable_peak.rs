@@ -8,6 +8,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "stable-peak",
     parameter: Some("threshold"),
     about: "rule 3: stop when the peak has not changed for T features",
+    geometric: false,
     make: |t, _| {
         let t = non_negative("threshold", t)?;
         if t.fract() != 0.0 {

@@ -212,3 +212,77 @@ fn every_registered_rule_has_a_unique_name() {
     names.dedup();
     assert_eq!(names.len(), RULES.len());
 }
+
+/// A geometric check that finds `inliers` for image 0 and none elsewhere,
+/// counting its calls.
+struct FakeCheck {
+    inliers: usize,
+    calls: usize,
+}
+
+impl LeaderCheck for FakeCheck {
+    fn inliers(&mut self, image: u32, voted: &[(u32, u32)]) -> usize {
+        self.calls += 1;
+        assert!(!voted.is_empty());
+        if image == 0 { self.inliers } else { 0 }
+    }
+}
+
+fn verified_stop(m: f64, stream: &[u32], check: &mut FakeCheck) -> Option<usize> {
+    let map = one_word_per_image();
+    let view = map.view();
+    let mut voter = Voter::new(&view);
+    let mut rule = spec("verified", m).build(&RuleContext::default());
+    let mut voted = Vec::new();
+    for (i, &w) in stream.iter().enumerate() {
+        voter.vote(w);
+        voted.push((i as u32, w));
+        if rule.check_with(&voter, &voted, Some(check)).is_some() {
+            return Some(voter.tally().features);
+        }
+    }
+    None
+}
+
+#[test]
+fn verified_stops_once_a_stable_leader_has_enough_inliers() {
+    let s = [0u32; 200];
+    let mut c = FakeCheck {
+        inliers: 12,
+        calls: 0,
+    };
+    // the leader takes the lead at feature 1 and is checked once it has held
+    // it for STABLE more features
+    assert_eq!(verified_stop(12.0, &s, &mut c), Some(verified::STABLE + 1));
+    assert_eq!(c.calls, 1);
+    // too few inliers: checked every EVERY features, never stops
+    let mut c = FakeCheck {
+        inliers: 12,
+        calls: 0,
+    };
+    assert_eq!(verified_stop(13.0, &s, &mut c), None);
+    let expected = (200 - verified::STABLE - 1) / verified::EVERY + 1;
+    assert_eq!(c.calls, expected);
+    // a leader without inliers waits RECHECK features between checks
+    let s = [1u32; 200];
+    let mut c = FakeCheck {
+        inliers: 50,
+        calls: 0,
+    };
+    assert_eq!(verified_stop(8.0, &s, &mut c), None);
+    assert_eq!(
+        c.calls,
+        (200 - verified::STABLE - 1) / verified::RECHECK + 1
+    );
+    // without a check the rule never stops
+    let map = one_word_per_image();
+    let view = map.view();
+    let mut voter = Voter::new(&view);
+    let mut rule = spec("verified", 8.0).build(&RuleContext::default());
+    for _ in 0..100 {
+        voter.vote(0);
+        assert!(rule.check_with(&voter, &[(0, 0)], None).is_none());
+    }
+    assert!(RuleSpec::new("verified", Some(3.0)).is_err());
+    assert!(RuleSpec::new("verified", Some(8.5)).is_err());
+}

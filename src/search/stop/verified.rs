@@ -1,0 +1,80 @@
+//! Rule `verified` (m): stop once the leader is geometrically verified with
+//! at least m inliers against the features voted so far. Votes only choose
+//! which image to check; the check itself is a robust model fit between the
+//! query's keypoints and the candidate's stored keypoints (done outside the
+//! core, through [`LeaderCheck`]). A query whose leader never verifies runs to
+//! the end of its features, like the full search: easy queries stop early,
+//! hard ones lose nothing.
+//!
+//! A check costs far more than a vote, so the leader is checked only when it
+//! has held the lead for [`STABLE`] features, at most once every [`EVERY`]
+//! features, and a leader that failed is checked again only after
+//! [`RECHECK`] more features.
+
+use super::{LeaderCheck, RuleInfo, StopRule, Voter};
+
+pub const INFO: RuleInfo = RuleInfo {
+    name: "verified",
+    parameter: Some("inliers"),
+    about: "stop when the leader is geometrically verified with at least m inliers",
+    geometric: true,
+    make: |m, _| {
+        if !(m.is_finite() && m >= 4.0 && m <= 1000.0 && m.fract() == 0.0) {
+            return Err(format!(
+                "inliers of rule verified: a whole number in 4..=1000 (a homography needs 4 points), got {m}"
+            ));
+        }
+        Ok(Box::new(Verified {
+            min_inliers: m as usize,
+            leader: None,
+            next_check: 0,
+        }))
+    },
+};
+
+/// Features the leader must have held the lead before it is checked.
+pub const STABLE: usize = 16;
+/// Features between two checks.
+pub const EVERY: usize = 32;
+/// Features before a leader that failed is checked again.
+pub const RECHECK: usize = 64;
+
+struct Verified {
+    min_inliers: usize,
+    leader: Option<u32>,
+    /// Feature count from which the leader may be checked.
+    next_check: usize,
+}
+
+impl StopRule for Verified {
+    fn check(&mut self, _: &Voter<'_>) -> Option<String> {
+        None
+    }
+
+    fn check_with(
+        &mut self,
+        voter: &Voter<'_>,
+        voted: &[(u32, u32)],
+        leader_check: Option<&mut dyn LeaderCheck>,
+    ) -> Option<String> {
+        let t = voter.tally();
+        if t.leader != self.leader {
+            self.leader = t.leader;
+            self.next_check = t.features + STABLE;
+        }
+        let leader = self.leader?;
+        let checker = leader_check?;
+        if t.features < self.next_check {
+            return None;
+        }
+        let inliers = checker.inliers(leader, voted);
+        if inliers >= self.min_inliers {
+            return Some(format!(
+                "leader {leader} verified: {inliers} inliers ≥ {}",
+                self.min_inliers
+            ));
+        }
+        self.next_check = t.features + if inliers > 0 { EVERY } else { RECHECK };
+        None
+    }
+}
