@@ -21,6 +21,7 @@ for S in 1 2 3; do
     run "rtab-k1000-seed$S" --dataset $D/rtabmap-loop --words 1000 --seed "$S" \
         --rules none --set fixed=0.1 --set fixed=0.3 --runs 3 --cache data/eval-cache/rtabmap-loop
 done
+[ -n "${SEEDS_ONLY:-}" ] && exit 0
 # model, estimator and top k, on vocabulary seed 1
 for args in "--estimator ransac" "--model fundamental" "--model fundamental --estimator ransac --inlier-px 3" \
     "--inlier-px 4" "--inlier-px 12" "--verify-top-k 5" "--verify-top-k 20" "--max-word-pairs 1"; do
