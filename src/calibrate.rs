@@ -10,9 +10,18 @@
 //! as with real queries. The parameter is found by bisection with the eval's
 //! grids (`eval::sweep`). [`server_config`] writes a choice as a
 //! configuration file `bowloc serve --config` reads.
+//!
+//! A calibration can fail, and says so ([`Failure`]) rather than returning a
+//! search bound as a value: the warm-up leaves the rule unconsulted, the
+//! target is met only at a bound of the parameter's range, or not at all.
+//! Given real queries, [`Transfer`] checks that the choice holds on them too.
+//!
+//! The warm-up (features voted before a rule is consulted) is defined here,
+//! once: [`auto_warmup`] adapts it to the queries' feature count.
 
 use crate::eval::sweep::{
-    Setting, bisect_edge, parameter_range, round_significant, search_one, seed,
+    Setting, bisect_edge, format_parameter, parameter_range, round_significant_toward, search_one,
+    seed,
 };
 use crate::index::{ImageWords, MapBuilder, MapIndex};
 use crate::search::RuleSpec;
@@ -26,6 +35,28 @@ use std::path::Path;
 
 /// Share of each pseudo-query's features that is dropped.
 const DROP: f64 = 0.3;
+
+/// The largest warm-up [`auto_warmup`] gives.
+pub const MAX_WARMUP: usize = 100;
+/// The share of the median query's features [`auto_warmup`] gives at most.
+pub const WARMUP_SHARE: f64 = 0.25;
+
+/// The median of `counts` (0 for none).
+pub fn median_features(counts: &[usize]) -> usize {
+    let mut sorted = counts.to_vec();
+    sorted.sort_unstable();
+    sorted.get(sorted.len() / 2).copied().unwrap_or(0)
+}
+
+/// The warm-up for queries with these feature counts: [`MAX_WARMUP`]
+/// features, but at most [`WARMUP_SHARE`] of the median query's, so a rule
+/// is consulted on most queries and still sees a few votes before it may
+/// stop. A map of small images (say 78 features a query) gets 19, one of
+/// large images (1000 and more) 100.
+pub fn auto_warmup(counts: &[usize]) -> usize {
+    let share = (WARMUP_SHARE * median_features(counts) as f64).floor() as usize;
+    share.min(MAX_WARMUP)
+}
 
 /// A calibration map and its pseudo-queries.
 pub struct PseudoQueries {
@@ -92,12 +123,7 @@ pub fn measure(
 
 /// Full bag-of-words' top-1 of every query.
 pub fn full_top1(map: &MapIndex, queries: &[Vec<u32>]) -> Vec<Option<u32>> {
-    let none = Setting {
-        rule: RuleSpec::new("none", None).expect("built in"),
-        min_features: 0,
-        target: None,
-        verify: false,
-    };
+    let none = Setting::new(RuleSpec::new("none", None).expect("built in"), 0);
     queries
         .par_iter()
         .map(|w| {
@@ -109,8 +135,38 @@ pub fn full_top1(map: &MapIndex, queries: &[Vec<u32>]) -> Vec<Option<u32>> {
         .collect()
 }
 
+/// Why a rule could not be calibrated.
+#[derive(Debug, Clone, PartialEq, Serialize, thiserror::Error)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum Failure {
+    #[error(
+        "warm-up {warmup} ≥ the median pseudo-query's {features} features: the rule would not be \
+         consulted on most queries (lower --min-features, or leave it out for {auto})"
+    )]
+    WarmupTooLarge {
+        warmup: usize,
+        features: usize,
+        auto: usize,
+    },
+    #[error(
+        "even at its most conservative value ({bound}) it disagrees with full search on \
+         {disagreement:.3} of the pseudo-queries (target {target})"
+    )]
+    Unreachable {
+        bound: String,
+        disagreement: f64,
+        target: f64,
+    },
+    #[error(
+        "the target is met only at the search bound {bound}, where it uses {percent:.1} % of the \
+         features: the bound is not a calibrated value"
+    )]
+    AtBound { bound: String, percent: f64 },
+}
+
 /// The most aggressive parameter of `rule` whose disagreement is at most
-/// `max_disagreement`.
+/// `max_disagreement`, rounded to 3 significant digits on the conservative
+/// side; or why there is none worth the name.
 pub fn calibrate_rule(
     pseudo: &PseudoQueries,
     full: &[Option<u32>],
@@ -118,14 +174,23 @@ pub fn calibrate_rule(
     min_features: usize,
     max_disagreement: f64,
     runs: u32,
-) -> anyhow::Result<Option<Calibrated>> {
+) -> anyhow::Result<Result<Calibrated, Failure>> {
     let (lo, hi, whole) = parameter_range(rule)
         .with_context(|| format!("rule `{rule}` has no parameter to calibrate"))?;
-    let setting = |p: f64| Setting {
-        rule: RuleSpec::new(rule, Some(p)).expect("within the rule's range"),
-        min_features,
-        target: None,
-        verify: false,
+    let counts: Vec<usize> = pseudo.queries.iter().map(Vec::len).collect();
+    let features = median_features(&counts);
+    if min_features >= features {
+        return Ok(Err(Failure::WarmupTooLarge {
+            warmup: min_features,
+            features,
+            auto: auto_warmup(&counts),
+        }));
+    }
+    let setting = |p: f64| {
+        Setting::new(
+            RuleSpec::new(rule, Some(p)).expect("within the rule's range"),
+            min_features,
+        )
     };
     let run = |p: f64| measure(&pseudo.map, &pseudo.queries, full, &setting(p), runs);
     // the aggressive end is the one using fewer features
@@ -136,19 +201,90 @@ pub fn calibrate_rule(
     };
     let ok = |p: f64| run(p).0 <= max_disagreement;
     let Some(p) = bisect_edge(conservative, aggressive, whole, &ok) else {
-        return Ok(None);
+        return Ok(Err(Failure::Unreachable {
+            bound: format_parameter(conservative),
+            disagreement: run(conservative).0,
+            target: max_disagreement,
+        }));
     };
-    // three significant digits, unless rounding crosses the edge
-    let rounded = if whole { p } else { round_significant(p, 3) };
+    if p == conservative || p == aggressive {
+        return Ok(Err(Failure::AtBound {
+            bound: format_parameter(p),
+            percent: 100.0 * run(p).1,
+        }));
+    }
+    // three significant digits, towards the conservative end (which stays
+    // within the target when the disagreement moves one way along the range)
+    let rounded = round_significant_toward(p, 3, conservative > aggressive);
     let p = if ok(rounded) { rounded } else { p };
     let (disagreement, fraction) = measure(&pseudo.map, &pseudo.queries, full, &setting(p), runs);
-    Ok(Some(Calibrated {
+    Ok(Ok(Calibrated {
         rule: rule.to_owned(),
         parameter: p,
         min_features,
         disagreement,
         fraction,
     }))
+}
+
+/// How a calibrated rule does on real queries.
+#[derive(Debug, Clone, Serialize)]
+pub struct Transfer {
+    /// Disagreement with full search's top-1.
+    pub disagreement: f64,
+    /// Mean fraction of features used.
+    pub fraction: f64,
+    pub recall_full: f64,
+    pub recall_early: f64,
+    /// Whether the disagreement meets the calibration's target.
+    pub passed: bool,
+}
+
+/// The rule `--out` writes: of the calibrated rules that passed the transfer
+/// check (all of them without one), the one using the fewest pseudo-query
+/// features. With none passing, an error naming the rules and their real
+/// disagreement, unless `force`, which takes the cheapest calibrated rule.
+pub fn choose(
+    chosen: &[(Calibrated, Option<Transfer>)],
+    max_disagreement: f64,
+    force: bool,
+) -> anyhow::Result<&Calibrated> {
+    let cheapest = |passing: bool| {
+        chosen
+            .iter()
+            .filter(|(_, t)| !passing || t.as_ref().is_none_or(|t| t.passed))
+            .min_by(|x, y| x.0.fraction.total_cmp(&y.0.fraction))
+            .map(|(c, _)| c)
+    };
+    if chosen.is_empty() {
+        anyhow::bail!("no rule could be calibrated; nothing written");
+    }
+    if let Some(c) = cheapest(true) {
+        return Ok(c);
+    }
+    if force {
+        return Ok(cheapest(false).expect("not empty"));
+    }
+    let misses: Vec<String> = chosen
+        .iter()
+        .filter_map(|(c, t)| {
+            t.as_ref().map(|t| {
+                format!(
+                    "{} {}: {:.3}",
+                    c.rule,
+                    format_parameter(c.parameter),
+                    t.disagreement
+                )
+            })
+        })
+        .collect();
+    anyhow::bail!(
+        "the transfer check failed: on the dataset's real queries every calibrated rule \
+         disagrees with full search more than the target {max_disagreement} ({}); the \
+         pseudo-queries are unlike the real ones, so nothing was written (--force writes \
+         the cheapest rule anyway)",
+        misses.join(", ")
+    )
 }
 
 /// A configuration file for `bowloc serve --config` that serves `map` (built
@@ -181,6 +317,59 @@ pub fn server_config(best: &Calibrated, vocab: &Path, map: &Path, max_disagreeme
 mod tests {
     use super::*;
     use crate::eval::sweep::bisect_edge;
+
+    #[test]
+    fn warm_up_adapts_to_the_feature_count() {
+        assert_eq!(median_features(&[5, 1, 9]), 5);
+        assert_eq!(median_features(&[]), 0);
+        assert_eq!(auto_warmup(&[78, 80, 70]), 19);
+        assert_eq!(auto_warmup(&[1053, 900, 2000]), MAX_WARMUP);
+        assert_eq!(auto_warmup(&[]), 0);
+    }
+
+    fn calibrated(rule: &str, fraction: f64) -> Calibrated {
+        Calibrated {
+            rule: rule.into(),
+            parameter: 1.5,
+            min_features: 10,
+            disagreement: 0.01,
+            fraction,
+        }
+    }
+
+    fn transfer(passed: bool) -> Option<Transfer> {
+        Some(Transfer {
+            disagreement: if passed { 0.01 } else { 0.093 },
+            fraction: 0.5,
+            recall_full: 0.9,
+            recall_early: 0.8,
+            passed,
+        })
+    }
+
+    #[test]
+    fn out_takes_the_cheapest_rule_that_transfers_and_refuses_when_none_does() {
+        let both = vec![
+            (calibrated("stable-peak", 0.4), transfer(false)),
+            (calibrated("peak-mean", 0.6), transfer(true)),
+        ];
+        assert_eq!(choose(&both, 0.01, false).unwrap().rule, "peak-mean");
+        let none = vec![
+            (calibrated("stable-peak", 0.4), transfer(false)),
+            (calibrated("peak-mean", 0.6), transfer(false)),
+        ];
+        let e = choose(&none, 0.01, false).unwrap_err().to_string();
+        assert!(
+            e.contains("transfer check failed") && e.contains("--force"),
+            "{e}"
+        );
+        assert!(e.contains("stable-peak 1.5: 0.093"), "{e}");
+        assert_eq!(choose(&none, 0.01, true).unwrap().rule, "stable-peak");
+        // without a dataset there is no check
+        let unchecked = vec![(calibrated("relative", 0.7), None)];
+        assert_eq!(choose(&unchecked, 0.01, false).unwrap().rule, "relative");
+        assert!(choose(&[], 0.01, true).is_err());
+    }
 
     #[test]
     fn bisect_edge_finds_the_boundary_from_either_side() {

@@ -264,8 +264,8 @@ impl Localization {
                 extract: ms(edge.extract),
                 quantize: ms(t.quantize),
                 vote: ms(t.vote),
-                verify: 0.0,
-                total: ms(edge.decode + edge.extract + t.quantize + t.vote),
+                verify: ms(t.verify),
+                total: ms(edge.decode + edge.extract + t.quantize + t.vote + t.verify),
             },
             map: MapIdentity::of(map),
             verified: None,
@@ -302,7 +302,7 @@ impl Localization {
                 .and_then(|c| c.verified)
                 .unwrap_or(false),
         );
-        self.timings_ms.verify = ms(elapsed);
+        self.timings_ms.verify += ms(elapsed);
         self.timings_ms.total += ms(elapsed);
         self
     }

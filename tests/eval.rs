@@ -1,5 +1,6 @@
-//! End to end: `bowloc eval` on the real rtabmap-loop dataset with a small
-//! vocabulary and few runs, then a second run served from the cache.
+//! End to end: `bowloc eval` on the real rtabmap-loop dataset with small
+//! vocabularies (two k-means seeds) and few runs, then a second run served
+//! from the cache; and options that are wrong fail before any work.
 
 mod common;
 
@@ -7,8 +8,8 @@ use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
 
-fn eval(out: &Path, cache: &Path, extra: &[&str]) -> String {
-    let output = Command::new(env!("CARGO_BIN_EXE_bowloc"))
+fn run_eval(out: &Path, cache: &Path, extra: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_bowloc"))
         .arg("eval")
         .arg("--dataset")
         .arg(common::dataset("rtabmap-loop"))
@@ -16,13 +17,42 @@ fn eval(out: &Path, cache: &Path, extra: &[&str]) -> String {
         .arg(out)
         .arg("--cache")
         .arg(cache)
-        .args(["--words", "200", "--log", "info"])
+        .args(["--words", "200", "--vocab-seeds", "2", "--log", "info"])
         .args(extra)
         .output()
-        .expect("bowloc runs");
+        .expect("bowloc runs")
+}
+
+fn eval(out: &Path, cache: &Path, extra: &[&str]) -> String {
+    let output = run_eval(out, cache, extra);
     let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
     assert!(output.status.success(), "bowloc eval failed:\n{stderr}");
     stderr
+}
+
+#[test]
+fn bad_set_and_histogram_values_fail_before_any_extraction() {
+    let dir = tempfile::tempdir().unwrap();
+    let (out, cache) = (dir.path().join("out"), dir.path().join("cache"));
+    for (args, says) in [
+        (["--set", "relative=2.5x"], "--set relative=2.5x"),
+        (["--set", "nope=1"], "unknown rule `nope`"),
+        (
+            ["--histogram", "peak-mean=abc"],
+            "--histogram peak-mean=abc",
+        ),
+        (["--histogram", "nope"], "rule `nope` is not in the sweep"),
+    ] {
+        let started = std::time::Instant::now();
+        let o = run_eval(&out, &cache, &args);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} accepted");
+        assert!(stderr.contains(says), "{args:?}: {stderr}");
+        // nothing was extracted or trained
+        assert!(!cache.exists() && !out.exists(), "{args:?}");
+        assert!(!stderr.contains("extract"), "{args:?}: {stderr}");
+        assert!(started.elapsed().as_secs() < 5, "{args:?}");
+    }
 }
 
 fn mean(v: &Value) -> f64 {
@@ -40,9 +70,9 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
             "--runs",
             "3",
             "--min-features",
-            "0,10",
+            "0,100",
             "--targets",
-            "0.4,0.7",
+            "0.3,0.4,0.7",
         ],
     );
     assert!(log.contains("training vocabulary"), "{log}");
@@ -64,6 +94,20 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
         serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
     assert_eq!(report["dataset"]["queries"], 44);
     assert_eq!(report["dataset"]["with_match"], 44);
+    // Two vocabularies, and where they were made.
+    let vocabularies = report["vocabularies"].as_array().unwrap();
+    assert_eq!(vocabularies.len(), 2);
+    assert_ne!(vocabularies[0]["hash"], vocabularies[1]["hash"]);
+    assert_eq!(report["config"]["seeds"], serde_json::json!([1, 2]));
+    let machine = &report["machine"];
+    assert!(!machine["cpu_model"].as_str().unwrap().is_empty());
+    assert!(
+        machine["opencv"]["version"]
+            .as_str()
+            .unwrap()
+            .starts_with('4')
+    );
+    assert_eq!(machine["map_descriptors"].as_str().unwrap().len(), 16);
     let settings = report["settings"].as_array().unwrap();
     let find = |rule: &str, p: Option<f64>| {
         settings
@@ -91,7 +135,7 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
     assert!((0.48..=0.55).contains(&half), "fixed 0.5 used {half}");
 
     // Calibrated rules ran at both warm-ups, and peak-mean spans the targets.
-    for w in [0, 10] {
+    for w in [0, 100] {
         assert!(
             settings
                 .iter()
@@ -106,14 +150,59 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
         })
         .map(|s| mean(&s["fraction"]))
         .collect();
-    assert_eq!(peak.len(), 2);
+    assert_eq!(peak.len(), 3);
     assert!(peak.iter().any(|&f| (0.3..0.5).contains(&f)), "{peak:?}");
     assert!(peak.iter().any(|&f| (0.6..0.8).contains(&f)), "{peak:?}");
+
+    // A warm-up of 100 leaves these queries (162 features on average) no
+    // way to 30 % of the features: those grid points are marked degenerate
+    // and neither the equal-recall tables nor the recommendation use them.
+    let degenerate: Vec<usize> = settings
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s["setting"]["degenerate"].is_string())
+        .map(|(i, _)| i)
+        .collect();
+    assert!(!degenerate.is_empty());
+    for &i in &degenerate {
+        assert_eq!(settings[i]["setting"]["min_features"], 100);
+    }
+    let mut used: Vec<u64> = vec![report["recommendation"]["index"].as_u64().unwrap()];
+    for table in ["equal_recall", "equal_recall_plain"] {
+        for row in report[table]["rows"].as_array().unwrap() {
+            for c in row["cheapest"].as_array().unwrap() {
+                used.extend(c["index"].as_u64());
+            }
+        }
+    }
+    assert!(used.len() > 10);
+    assert!(used.iter().all(|i| !degenerate.contains(&(*i as usize))));
+
+    // Every query's answers, for re-scoring: [seed][setting][run][query].
+    let per_query = &report["per_query"]["outcomes"];
+    assert_eq!(per_query.as_array().unwrap().len(), 2);
+    assert_eq!(per_query[0].as_array().unwrap().len(), settings.len());
+    assert_eq!(per_query[0][0].as_array().unwrap().len(), 3);
+    let answer = per_query[1][0][2]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|a| a["total"].as_u64() > Some(0))
+        .unwrap();
+    assert_eq!(answer["used"], answer["total"]);
+    assert_eq!(answer["stop"], "exhausted");
+    let top = answer["candidates"].as_array().unwrap();
+    assert!(!top.is_empty() && top.len() <= 10 && top[0].as_array().unwrap().len() == 2);
 
     // Per run, recall at 90 % precision grows with n and never exceeds
     // plain recall@5 for n = 5.
     for s in settings {
-        for run in s["runs"].as_array().unwrap() {
+        for run in s["runs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|r| r.as_array().unwrap())
+        {
             let r: Vec<f64> = run["recall90"]
                 .as_array()
                 .unwrap()
@@ -126,7 +215,10 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
                 "{run}"
             );
         }
-        assert_eq!(s["runs"].as_array().unwrap().len(), 3);
+        assert_eq!(s["runs"].as_array().unwrap().len(), 2);
+        assert_eq!(s["runs"][1].as_array().unwrap().len(), 3);
+        let per_seed = s["recall_at_1"]["per_seed"].as_array().unwrap();
+        assert_eq!(per_seed.len(), 2);
     }
 
     // One CSV row per setting.
@@ -134,6 +226,9 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
     assert_eq!(csv.lines().count(), settings.len() + 1);
     let md = std::fs::read_to_string(out.join("results.md")).unwrap();
     assert!(md.contains("recall top-5 @90%P") && md.contains("### Rule `peak-mean`"));
+    assert!(md.contains("### Features needed at equal plain recall"));
+    assert!(md.contains(" ± ") && md.contains("(std over feature orders, top-5)"));
+    assert!(md.contains("† degenerate grid point"));
 
     // A second run with other rules reuses descriptors, vocabulary and map.
     let out2 = dir.path().join("out2");
@@ -156,7 +251,7 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
     assert!(!log.contains("training vocabulary"), "{log}");
     let again: Value =
         serde_json::from_slice(&std::fs::read(out2.join("results.json")).unwrap()).unwrap();
-    assert_eq!(again["vocabulary"]["hash"], report["vocabulary"]["hash"]);
+    assert_eq!(again["vocabularies"], report["vocabularies"]);
     // Full search, three fixed fractions and the setting asked for.
     let settings = again["settings"].as_array().unwrap();
     assert_eq!(settings.len(), 5);

@@ -2,8 +2,10 @@
 
 use bowloc::features::{ExtractConfig, SiftParams};
 use bowloc::geometry::verify::{Estimator, Model, VerifyParams};
-use bowloc::search::{RuleSpec, SearchOptions};
+use bowloc::search::SearchOptions;
+use bowloc::search::stop::{GENERIC_PARAMETER, RULES, parse_rule};
 use clap::Args;
+use clap::builder::{PossibleValue, PossibleValuesParser};
 
 /// How descriptors are extracted (recorded in the vocabulary).
 #[derive(Args, Debug, Clone)]
@@ -47,42 +49,79 @@ impl ExtractArgs {
     }
 }
 
-/// The search: rule, its parameter, and ranking.
+/// The rule names with their one-line descriptions, from the registry.
+fn rule_parser() -> PossibleValuesParser {
+    PossibleValuesParser::new(
+        RULES
+            .iter()
+            .map(|r| PossibleValue::new(r.name).help(r.about)),
+    )
+}
+
+/// The search: rule, its parameter, and ranking. Defaults are the service's
+/// (`SearchOptions::recommended`), and the rule and its parameter go through
+/// the registry's parser, as the service's query string does.
 #[derive(Args, Debug, Clone)]
 pub struct SearchArgs {
-    /// Stopping rule: none, peak-mean, relative, stable-peak, hoeffding, fixed.
-    #[arg(long, default_value = "none")]
+    /// Stopping rule.
+    #[arg(long, value_parser = rule_parser(), default_value = SearchOptions::RECOMMENDED_RULE)]
     pub rule: String,
-    /// Parameter of rules that take a threshold (T of rules 1–3).
+    /// The rule's parameter, whatever its name (T of peak-mean, relative and
+    /// stable-peak; also δ, f or m). Default: the recommended value when the
+    /// rule is the recommended one.
     #[arg(long)]
     pub threshold: Option<f64>,
-    /// Parameter of rules that take a confidence δ (hoeffding).
-    #[arg(long, conflicts_with = "threshold")]
+    /// δ of rules hoeffding and confident, in (0, 1).
+    #[arg(long)]
     pub delta: Option<f64>,
-    /// Parameter of rule `fixed` (fraction of features).
-    #[arg(long, conflicts_with_all = ["threshold", "delta"])]
+    /// f of rule fixed: the share of the features to use, in (0, 1].
+    #[arg(long)]
     pub fraction: Option<f64>,
+    /// m of rule verified: the inliers that verify the leader.
+    #[arg(long)]
+    pub inliers: Option<f64>,
     /// Candidates to return.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = SearchOptions::recommended().top_n)]
     pub top_n: usize,
     /// Permutation seed (random when absent; the answer reports it).
     #[arg(long)]
     pub seed: Option<u64>,
     /// Features quantized per batch.
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = SearchOptions::recommended().block)]
     pub block: usize,
-    /// Features voted before the rule is consulted.
-    #[arg(long, default_value_t = 0)]
+    /// Features voted before the rule is consulted (the warm-up).
+    #[arg(long, default_value_t = SearchOptions::recommended().min_features)]
     pub min_features: usize,
     /// Drop candidates scoring below this.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = SearchOptions::recommended().min_score)]
     pub min_score: f32,
 }
 
 impl SearchArgs {
+    /// The parameters given, by name.
+    fn given(&self) -> Vec<(&'static str, f64)> {
+        [
+            (GENERIC_PARAMETER, self.threshold),
+            ("delta", self.delta),
+            ("fraction", self.fraction),
+            ("inliers", self.inliers),
+        ]
+        .into_iter()
+        .filter_map(|(n, v)| v.map(|v| (n, v)))
+        .collect()
+    }
+
     pub fn options(&self) -> anyhow::Result<SearchOptions> {
-        let parameter = self.threshold.or(self.delta).or(self.fraction);
-        let rule = RuleSpec::new(&self.rule, parameter).map_err(anyhow::Error::msg)?;
+        let recommended = SearchOptions::recommended();
+        let given = self.given();
+        let rule = if given.is_empty() && self.rule == recommended.rule.name {
+            recommended.rule.clone()
+        } else {
+            parse_rule(&self.rule, &given).map_err(|e| match e.parameter {
+                Some(p) if p != "rule" => anyhow::anyhow!("--{p}: {}", e.message),
+                _ => anyhow::anyhow!("--rule: {}", e.message),
+            })?
+        };
         anyhow::ensure!(self.top_n >= 1, "--top-n must be at least 1");
         anyhow::ensure!(self.block >= 1, "--block must be at least 1");
         Ok(SearchOptions {
@@ -94,6 +133,71 @@ impl SearchArgs {
             min_score: self.min_score,
             deadline: None,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bowloc::search::stop::parameter_names;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        search: SearchArgs,
+    }
+
+    fn parse(args: &[&str]) -> anyhow::Result<SearchOptions> {
+        let mut all = vec!["t"];
+        all.extend_from_slice(args);
+        Cli::try_parse_from(all)?.search.options()
+    }
+
+    #[test]
+    fn defaults_are_the_services_and_every_parameter_has_a_flag() {
+        let o = parse(&[]).unwrap();
+        let r = SearchOptions::recommended();
+        assert_eq!(
+            (o.rule, o.min_features, o.top_n),
+            (r.rule, r.min_features, r.top_n)
+        );
+        let flags: Vec<String> = SearchArgs::augment_args(clap::Command::new("t"))
+            .get_arguments()
+            .map(|a| a.get_id().to_string())
+            .collect();
+        for name in parameter_names() {
+            assert!(flags.iter().any(|f| f == name), "no --{name}");
+        }
+        for rule in RULES {
+            assert!(
+                parse(&["--rule", rule.name]).is_ok() || rule.parameter.is_some(),
+                "{}",
+                rule.name
+            );
+        }
+    }
+
+    #[test]
+    fn the_cli_refuses_what_the_api_refuses() {
+        assert!(parse(&["--rule", "none", "--threshold", "2.5"]).is_err());
+        assert!(parse(&["--rule", "peak-mean", "--delta", "0.1"]).is_err());
+        assert!(parse(&["--rule", "relative", "--threshold", "1", "--delta", "0.1"]).is_err());
+        assert!(parse(&["--rule", "nope"]).is_err());
+        assert_eq!(
+            parse(&["--rule", "hoeffding", "--delta", "0.1"])
+                .unwrap()
+                .rule
+                .parameter,
+            0.1
+        );
+        assert_eq!(
+            parse(&["--rule", "verified", "--inliers", "12"])
+                .unwrap()
+                .rule
+                .parameter,
+            12.0
+        );
     }
 }
 

@@ -2,7 +2,8 @@
 //! layout (tables, CSV, JSON and plots in `--out`).
 
 use super::args::{ExtractArgs, VerifyArgs};
-use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig};
+use bowloc::eval::machine::OpenCvInfo;
+use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig, Warmup};
 use bowloc::features::TileGrid;
 use clap::Args;
 use std::path::PathBuf;
@@ -24,9 +25,10 @@ pub struct EvalArgs {
     /// Extra settings to run, RULE=VALUE or RULE=VALUE@WARMUP (repeatable).
     #[arg(long = "set", value_name = "RULE=VALUE[@WARMUP]")]
     set: Vec<String>,
-    /// Warm-ups (min_features) for the calibrated rules; the first is used for the main tables.
-    #[arg(long, value_delimiter = ',', default_values_t = [0usize, 20, 100])]
-    min_features: Vec<usize>,
+    /// Warm-ups (min_features) for the calibrated rules; the first is used for the main
+    /// tables. `auto`: at most 100, and at most a quarter of the median query's features.
+    #[arg(long, value_delimiter = ',', default_values_t = [Warmup::Features(0), Warmup::Features(20), Warmup::Auto])]
+    min_features: Vec<Warmup>,
     /// Mean fractions of features the calibrated grids aim at.
     #[arg(long, value_delimiter = ',', default_values_t = DEFAULT_TARGETS.to_vec())]
     targets: Vec<f64>,
@@ -36,13 +38,14 @@ pub struct EvalArgs {
     /// Setting of the histogram figure: RULE or RULE=VALUE (default: the recommended one).
     #[arg(long)]
     histogram: Option<String>,
-    /// k-means seed.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    /// Vocabularies to train: N (k-means seeds 1..=N) or a list of seeds `a,b,…`
+    /// (a seed repeated counts once: `7,7` is seed 7 alone).
+    #[arg(long, value_delimiter = ',', default_value = "3")]
+    vocab_seeds: Vec<u64>,
     /// Use this vocabulary instead of training one (its extraction settings are used).
     #[arg(long)]
     vocab: Option<PathBuf>,
-    /// Output folder (default data/eval/<dataset>).
+    /// Output folder (default data/eval/<dataset>-k<K>).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Cache folder (default data/eval-cache/<dataset>).
@@ -70,11 +73,20 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         .ok()
         .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
         .unwrap_or_else(|| "dataset".into());
+    let seeds = match a.vocab_seeds.as_slice() {
+        [n] => (1..=*n).collect(),
+        list => list.iter().fold(Vec::new(), |mut seeds, &s| {
+            if !seeds.contains(&s) {
+                seeds.push(s);
+            }
+            seeds
+        }),
+    };
     let verify = a.verify.params()?;
     let config = EvalConfig {
         verify: verify.enabled.then_some(verify),
         words: a.words,
-        seed: a.seed,
+        seeds,
         runs: a.runs,
         rules: a.rules,
         explicit: a.set,
@@ -87,13 +99,14 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         vocab: a.vocab,
         out: a
             .out
-            .unwrap_or_else(|| PathBuf::from("data/eval").join(&name)),
+            .unwrap_or_else(|| PathBuf::from("data/eval").join(format!("{name}-k{}", a.words))),
         cache: a
             .cache
             .unwrap_or_else(|| PathBuf::from("data/eval-cache").join(&name)),
         plots: !a.no_plots,
         command: std::env::args().collect::<Vec<_>>().join(" "),
         dataset: a.dataset,
+        opencv: opencv_info(),
     };
     let report = eval::run(&config)?;
     tracing::info!(
@@ -104,14 +117,29 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
     );
     if let Some(r) = &report.recommendation {
         println!(
-            "recommended: {} ({:.1} % of features, recall top-5 @90%P {:.1} % vs {:.1} %, recall@1 {:.1} % vs {:.1} %)",
+            "recommended: {} ({:.1} % of features, worst seed {:.1} %; recall top-5 @90%P {:.1} % vs {:.1} %, recall@1 {:.1} % vs {:.1} %, means over seeds)",
             r.label,
             100.0 * r.fraction,
+            100.0 * r.worst_fraction,
             100.0 * r.recall90_top5,
             100.0 * r.baseline_recall90_top5,
             100.0 * r.recall_at_1,
             100.0 * r.baseline_recall_at_1
         );
+    }
+    let degenerate = report
+        .settings
+        .iter()
+        .filter(|s| s.setting.degenerate.is_some())
+        .count();
+    if degenerate > 0 {
+        println!(
+            "{degenerate} degenerate grid points (target out of reach or warm-up too long), \
+             marked † in results.md and left out of the equal-recall tables and the recommendation"
+        );
+    }
+    if let Some(why) = &report.no_recommendation {
+        println!("no recommendation: {why}");
     }
     if let Some(v) = &report.verification {
         for r in &v.rows {
@@ -132,4 +160,14 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
     }
     println!("{}", config.out.join("results.md").display());
     Ok(())
+}
+
+/// OpenCV's version and the SIMD level its dispatcher uses on this CPU.
+fn opencv_info() -> OpenCvInfo {
+    let cpu_features = opencv::core::get_cpu_features_line().unwrap_or_default();
+    OpenCvInfo {
+        version: opencv::core::get_version_string().unwrap_or_else(|_| "unknown".into()),
+        dispatched: OpenCvInfo::dispatched_level(&cpu_features),
+        cpu_features,
+    }
 }

@@ -46,6 +46,9 @@ enum Command {
     Serve(serve::ServeArgs),
     /// Print the HTTP API's OpenAPI document (as in docs/openapi.json).
     Openapi,
+    /// Print the stopping rules and their parameters (the table of
+    /// docs/service.md), from the registry every front end reads.
+    Rules,
     /// Exit 0 when a running service's /healthz answers 200.
     Healthcheck(healthcheck::HealthcheckArgs),
 }
@@ -95,6 +98,10 @@ pub fn run() -> ExitCode {
                 Command::Eval(a) => eval::run(*a),
                 Command::Calibrate(a) => calibrate::run(a),
                 Command::Openapi => serve::print_openapi(),
+                Command::Rules => {
+                    print!("{}", bowloc::search::stop::rules_markdown());
+                    Ok(())
+                }
                 Command::Healthcheck(a) => healthcheck::run(a),
                 Command::Serve(_) => unreachable!("handled above"),
             }

@@ -1,18 +1,22 @@
 //! Features needed at equal recall: for every rule and warm-up, the fewest
-//! features (mean fraction over queries and runs) among the settings the
-//! sweep evaluated whose recall top-5 @90%P and recall@1 are both at most a
-//! tolerance below the full search's — the recommender's criterion
-//! ([`recommend::within`]) applied to one rule at a time. The resolution is
-//! that of the grids: no value between two settings is interpolated. A rule
-//! none of whose settings qualifies has no entry at that tolerance.
+//! features (the worst vocabulary seed's mean fraction over queries and
+//! runs) among the settings the sweep evaluated whose two recalls of a
+//! [`Criterion`] — recall top-5 @90%P and recall@1, or plain recall@1 and
+//! recall@5 — are both at most a tolerance below the full search's on every
+//! seed: the recommender's test ([`recommend::within`]) applied to one rule
+//! at a time, degenerate grid points left out. The resolution is that of the
+//! grids: no value between two settings is interpolated. A rule none of
+//! whose settings qualifies has no entry at that tolerance.
 
-use super::recommend;
+use super::recommend::{self, Criterion};
 use super::summary::SettingSummary;
 use super::sweep::BASELINE;
 use serde::Serialize;
 
 /// The strict tolerance: half a point of recall.
 pub const STRICT_TOLERANCE: f64 = 0.005;
+/// The tolerance of the plain-recall table: one point.
+pub const PLAIN_TOLERANCE: f64 = 0.01;
 
 /// The setting a rule needs at one tolerance.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -20,8 +24,10 @@ pub struct Cheapest {
     /// Index into the summaries.
     pub index: usize,
     pub label: String,
-    /// Mean fraction of features it used.
+    /// Mean fraction of features it used, over seeds.
     pub fraction: f64,
+    /// The fraction of its worst seed (the one it is chosen by).
+    pub worst_fraction: f64,
 }
 
 /// One rule at one warm-up.
@@ -31,6 +37,8 @@ pub struct RuleRow {
     pub min_features: usize,
     /// Settings of this rule and warm-up that were evaluated.
     pub settings: usize,
+    /// Of those, degenerate grid points (left out).
+    pub degenerate: usize,
     /// For each of [`EqualRecall::tolerances`], the cheapest setting within it.
     pub cheapest: Vec<Option<Cheapest>>,
 }
@@ -38,10 +46,11 @@ pub struct RuleRow {
 /// The whole table.
 #[derive(Debug, Clone, Serialize)]
 pub struct EqualRecall {
+    pub criterion: Criterion,
     /// Allowed loss of each recall (absolute), ascending.
     pub tolerances: Vec<f64>,
-    pub baseline_recall90_top5: f64,
-    pub baseline_recall_at_1: f64,
+    /// The full search's two figures of the criterion (means over seeds).
+    pub baseline: [f64; 2],
     /// In the order of `rules` given, warm-ups ascending within a rule.
     pub rows: Vec<RuleRow>,
 }
@@ -60,6 +69,7 @@ pub fn equal_recall(
     summaries: &[SettingSummary],
     rules: &[String],
     tolerances: &[f64],
+    criterion: Criterion,
 ) -> Option<EqualRecall> {
     let base = summaries.iter().find(|s| s.setting.rule.name == BASELINE)?;
     let mut rows = Vec::new();
@@ -81,27 +91,31 @@ pub fn equal_recall(
             let cheapest = tolerances
                 .iter()
                 .map(|&t| {
-                    recommend::cheapest_within(summaries, group.iter().copied(), base, t).map(
-                        |index| Cheapest {
+                    recommend::cheapest_within(summaries, group.iter().copied(), base, t, criterion)
+                        .map(|index| Cheapest {
                             index,
                             label: summaries[index].label.clone(),
                             fraction: summaries[index].fraction.mean,
-                        },
-                    )
+                            worst_fraction: summaries[index].fraction.highest(),
+                        })
                 })
                 .collect();
             rows.push(RuleRow {
                 rule: rule.clone(),
                 min_features: w,
                 settings: group.len(),
+                degenerate: group
+                    .iter()
+                    .filter(|&&i| summaries[i].setting.degenerate.is_some())
+                    .count(),
                 cheapest,
             });
         }
     }
     Some(EqualRecall {
+        criterion,
         tolerances: tolerances.to_vec(),
-        baseline_recall90_top5: base.recall90_at(5).mean,
-        baseline_recall_at_1: base.recall_at_1.mean,
+        baseline: criterion.figures(base).map(|f| f.mean),
         rows,
     })
 }
@@ -152,12 +166,10 @@ mod tests {
             &summaries,
             &rules(&["none", "peak-mean", "relative", "stable-peak", "hoeffding"]),
             &t,
+            Criterion::Precision90,
         )
         .unwrap();
-        assert_eq!(
-            (e.baseline_recall90_top5, e.baseline_recall_at_1),
-            (0.80, 0.90)
-        );
+        assert_eq!(e.baseline, [0.80, 0.90]);
         let keys: Vec<(&str, usize, usize)> = e
             .rows
             .iter()
@@ -189,8 +201,31 @@ mod tests {
     #[test]
     fn needs_the_full_search_and_merges_equal_tolerances() {
         let summaries = vec![s("fixed", Some(0.5), 0, 0.8, 0.9, 0.5)];
-        assert!(equal_recall(&summaries, &rules(&["fixed"]), &[0.02]).is_none());
+        assert!(
+            equal_recall(
+                &summaries,
+                &rules(&["fixed"]),
+                &[0.02],
+                Criterion::Precision90
+            )
+            .is_none()
+        );
         assert_eq!(tolerances(STRICT_TOLERANCE), [STRICT_TOLERANCE]);
         assert_eq!(tolerances(0.001), [0.001, STRICT_TOLERANCE]);
+    }
+
+    #[test]
+    fn degenerate_points_are_counted_and_left_out() {
+        let mut summaries = vec![
+            s("none", None, 0, 0.80, 0.90, 1.0),
+            s("relative", Some(1e-6), 100, 0.80, 0.90, 0.7),
+            s("relative", Some(3.0), 100, 0.80, 0.90, 0.8),
+        ];
+        summaries[1].setting.degenerate = Some("at the search bound 1e-6".into());
+        for criterion in [Criterion::Precision90, Criterion::PlainRecall] {
+            let e = equal_recall(&summaries, &rules(&["relative"]), &[0.01], criterion).unwrap();
+            assert_eq!((e.rows[0].settings, e.rows[0].degenerate), (2, 1));
+            assert_eq!(e.rows[0].cheapest[0].as_ref().unwrap().index, 2);
+        }
     }
 }

@@ -1,21 +1,27 @@
 //! The evaluation of the paper (Hajebi & Zhang, Tables I–IV, Figs. 5–7) on a
-//! dataset in the shared layout: vocabulary on the map images, every query
+//! dataset in the shared layout: vocabularies on the map images, every query
 //! searched under the full search and every stopping rule over a grid of
-//! parameters, repeated over random feature orders, then tables, CSV, JSON and
-//! plots. This module runs the stages in order:
+//! parameters, repeated over vocabulary seeds and random feature orders, then
+//! tables, CSV, JSON and plots. This module runs the stages in order:
 //!
-//! 1. [`cache`]: descriptors of map and queries, vocabulary and map — made
-//!    once, reused by later runs;
-//! 2. [`timing`]: each query quantized once (timed);
-//! 3. [`sweep`]: calibrate the grids, then vote every setting × run × query;
-//! 4. [`summary`] (with the definitions in [`metrics`]), [`recommend`] and
-//!    [`equal_recall`];
+//! 1. [`cache`]: descriptors of map and queries, and one vocabulary and map
+//!    per k-means seed — made once, reused by later runs; [`machine`]
+//!    records where they were made;
+//! 2. [`timing`]: each query quantized once per vocabulary (timed);
+//! 3. [`sweep`]: calibrate the grids (on the first vocabulary), then vote
+//!    every setting × vocabulary × run × query;
+//! 4. [`summary`] (with the definitions in [`metrics`]): every figure as a
+//!    mean over vocabulary seeds with its spread over seeds and, apart, over
+//!    runs; [`recommend`] and [`equal_recall`] decide on the worst seed;
 //! 5. [`verify`] (when asked): the full search and the explicit settings
-//!    re-ranked by geometric verification, with and without side by side;
-//! 6. [`table`] and [`plots`]: the outputs.
+//!    re-ranked by geometric verification, with and without side by side
+//!    (on the first vocabulary);
+//! 6. [`table`] and [`plots`]: the outputs, with every query's answers in
+//!    `results.json` for re-scoring.
 
 pub mod cache;
 pub mod equal_recall;
+pub mod machine;
 pub mod metrics;
 pub mod plots;
 pub mod recommend;
@@ -26,20 +32,24 @@ pub mod tiles;
 pub mod timing;
 pub mod verify;
 
+use crate::calibrate::{auto_warmup, median_features};
 use crate::dataset::Dataset;
 use crate::features::{ExtractConfig, TileGrid};
+use crate::index::MapIndex;
 use crate::pipeline::progress_bar;
+use crate::search::RuleSpec;
 use crate::vocabulary::Vocabulary;
 use crate::vocabulary::kmeans::KmeansConfig;
 use anyhow::{Context, bail};
 use equal_recall::EqualRecall;
+use machine::{MachineInfo, OpenCvInfo};
 use rayon::prelude::*;
-use recommend::Recommendation;
+use recommend::{Criterion, Recommendation};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use summary::{QueryCost, SettingSummary};
-use sweep::{BASELINE, Calibration, RULE_GRIDS, RuleGrid};
+use summary::{QueryCost, SeedOutcomes, SettingSummary};
+use sweep::{BASELINE, Calibration, Outcome, RULE_GRIDS, RuleGrid};
 use tiles::Query;
 
 /// Quantization block, as the search uses by default.
@@ -50,14 +60,53 @@ const HISTOGRAM_BINS: usize = 20;
 /// Default calibration targets: mean fraction of features used.
 pub const DEFAULT_TARGETS: &[f64] = &[0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95];
 
+/// A warm-up as asked for: a number of features, or `auto`
+/// ([`auto_warmup`] of the queries' feature counts).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Warmup {
+    Auto,
+    Features(usize),
+}
+
+impl Warmup {
+    pub fn resolve(self, auto: usize) -> usize {
+        match self {
+            Self::Auto => auto,
+            Self::Features(n) => n,
+        }
+    }
+}
+
+impl std::str::FromStr for Warmup {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim() {
+            "auto" => Ok(Self::Auto),
+            n => n
+                .parse()
+                .map(Self::Features)
+                .map_err(|_| format!("`{s}` is neither a number of features nor `auto`")),
+        }
+    }
+}
+
+impl std::fmt::Display for Warmup {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Auto => f.write_str("auto"),
+            Self::Features(n) => write!(f, "{n}"),
+        }
+    }
+}
+
 /// What to evaluate and where.
 #[derive(Debug, Clone)]
 pub struct EvalConfig {
     pub dataset: PathBuf,
     /// Vocabulary size K (ignored with `vocab`).
     pub words: usize,
-    /// k-means seed.
-    pub seed: u64,
+    /// k-means seeds: one vocabulary each (ignored with `vocab`).
+    pub seeds: Vec<u64>,
     /// Monte Carlo runs (random feature orders).
     pub runs: u32,
     /// Rules to sweep (empty: all of [`RULE_GRIDS`]); the full search is always in.
@@ -66,7 +115,7 @@ pub struct EvalConfig {
     /// run besides the grids and listed in a table of their own.
     pub explicit: Vec<String>,
     /// Warm-ups (`min_features`); the first is the main one.
-    pub warmups: Vec<usize>,
+    pub warmups: Vec<Warmup>,
     /// Calibration targets (mean fraction of features used).
     pub targets: Vec<f64>,
     /// Allowed recall loss for the recommended setting.
@@ -88,6 +137,8 @@ pub struct EvalConfig {
     pub plots: bool,
     /// The command line, recorded in the outputs.
     pub command: String,
+    /// OpenCV as loaded (recorded in the outputs).
+    pub opencv: OpenCvInfo,
     /// Also verify the full search and the explicit settings geometrically.
     pub verify: Option<crate::geometry::verify::VerifyParams>,
 }
@@ -103,15 +154,23 @@ pub struct DatasetInfo {
     pub ground_truth_pairs: usize,
     /// Mean descriptors per query.
     pub mean_features: f64,
+    /// Median descriptors per query.
+    pub median_features: usize,
+    /// Recall@1 of a random guess (see [`recommend::chance_recall`]).
+    pub chance_recall_at_1: f64,
 }
 
 /// The settings of the run, as recorded.
 #[derive(Debug, Clone, Serialize)]
 pub struct ConfigInfo {
     pub runs: u32,
-    pub seed: u64,
+    /// k-means seeds of the vocabularies.
+    pub seeds: Vec<u64>,
     pub rules: Vec<String>,
+    /// Warm-ups as run (`auto` resolved).
     pub warmups: Vec<usize>,
+    /// What `auto` resolved to.
+    pub auto_warmup: usize,
     pub targets: Vec<f64>,
     pub precision: f64,
     pub top_n: [usize; 3],
@@ -123,11 +182,12 @@ pub struct ConfigInfo {
 
 #[derive(Debug, Clone, Serialize)]
 pub struct VocabularyInfo {
+    pub seed: u64,
     pub words: usize,
     pub hash: String,
 }
 
-/// Wall time of each stage, in seconds.
+/// Wall time of each stage, in seconds (summed over vocabularies).
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Stages {
     pub extract_s: f64,
@@ -148,11 +208,23 @@ pub struct HistogramInfo {
     pub label: String,
     /// Counts in equal bins over [0, 1].
     pub bins: Vec<usize>,
-    /// Queries × runs counted.
+    /// Seeds × queries × runs counted.
     pub values: usize,
     pub mean: f64,
     pub median: f64,
     pub p95: f64,
+}
+
+/// Every search's outcome, for re-scoring: `outcomes[seed][setting][run][query]`
+/// (seeds in the order of [`ConfigInfo::seeds`], settings of
+/// [`Report::settings`], queries of `queries`).
+#[derive(Debug, Clone, Serialize)]
+pub struct PerQuery {
+    /// Query names, in dataset order.
+    pub queries: Vec<String>,
+    /// Each query's ground-truth matches (map ids, ascending).
+    pub truth: Vec<Vec<u32>>,
+    pub outcomes: Vec<Vec<Vec<Vec<Outcome>>>>,
 }
 
 /// Everything an evaluation produced.
@@ -161,19 +233,27 @@ pub struct Report {
     pub command: String,
     pub dataset: DatasetInfo,
     pub config: ConfigInfo,
-    pub vocabulary: VocabularyInfo,
+    pub machine: MachineInfo,
+    /// One per seed.
+    pub vocabularies: Vec<VocabularyInfo>,
     pub stages: Stages,
     pub calibrations: Vec<Calibration>,
     pub settings: Vec<SettingSummary>,
     /// Indices into `settings` of the settings asked for explicitly.
     pub explicit: Vec<usize>,
     pub recommendation: Option<Recommendation>,
-    /// Features each rule needs at equal recall.
+    /// Why there is no recommendation, when there is none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub no_recommendation: Option<String>,
+    /// Features each rule needs at equal recall (top-5 @90%P and recall@1).
     pub equal_recall: Option<EqualRecall>,
+    /// The same on plain recall@1 and recall@5.
+    pub equal_recall_plain: Option<EqualRecall>,
     pub histogram: Option<HistogramInfo>,
     /// The full search on the queries extracted whole (when they are tiled):
     /// its time share is against the tiled full search.
     pub whole_image: Option<SettingSummary>,
+    pub per_query: PerQuery,
     /// The verification pass, when asked for.
     pub verification: Option<verify::VerificationReport>,
 }
@@ -193,12 +273,24 @@ fn resolve_rules(names: &[String]) -> anyhow::Result<Vec<&'static RuleGrid>> {
     Ok(grids)
 }
 
+/// A `--histogram` value: `RULE` or `RULE=VALUE`.
+fn parse_histogram(spec: &str) -> anyhow::Result<(&str, Option<f64>)> {
+    Ok(match spec.split_once('=') {
+        Some((r, v)) => (
+            r.trim(),
+            Some(
+                v.trim()
+                    .parse::<f64>()
+                    .with_context(|| format!("--histogram {spec}: value"))?,
+            ),
+        ),
+        None => (spec.trim(), None),
+    })
+}
+
 /// The setting `spec` names (`RULE` or `RULE=VALUE`) at warm-up `w`.
 fn pick_setting(summaries: &[SettingSummary], spec: &str, w: usize) -> anyhow::Result<usize> {
-    let (rule, value) = match spec.split_once('=') {
-        Some((r, v)) => (r, Some(v.parse::<f64>().context("histogram value")?)),
-        None => (spec, None),
-    };
+    let (rule, value) = parse_histogram(spec)?;
     let distance = |s: &SettingSummary| match (value, s.setting.parameter()) {
         (Some(v), Some(p)) => (p - v).abs(),
         _ => (s.fraction.mean - 0.5).abs(),
@@ -210,6 +302,43 @@ fn pick_setting(summaries: &[SettingSummary], spec: &str, w: usize) -> anyhow::R
         .min_by(|(_, a), (_, b)| distance(a).total_cmp(&distance(b)))
         .map(|(i, _)| i)
         .with_context(|| format!("--histogram {spec}: no such setting in the sweep"))
+}
+
+/// Check every option before any extraction or training, so a typo fails
+/// at once; returns the grids of the rules asked for.
+fn validate(config: &EvalConfig) -> anyhow::Result<Vec<&'static RuleGrid>> {
+    anyhow::ensure!(config.runs >= 1, "--runs must be at least 1");
+    anyhow::ensure!(!config.warmups.is_empty(), "give at least one warm-up");
+    anyhow::ensure!(
+        config.vocab.is_some() || !config.seeds.is_empty(),
+        "give at least one vocabulary seed"
+    );
+    anyhow::ensure!(
+        config.targets.iter().all(|&t| t > 0.0 && t <= 1.0),
+        "targets are fractions in (0, 1]"
+    );
+    anyhow::ensure!(
+        (0.0..1.0).contains(&config.tolerance),
+        "--tolerance must lie in [0, 1)"
+    );
+    let grids = resolve_rules(&config.rules)?;
+    let mut rules: Vec<String> = grids.iter().map(|g| g.rule.to_owned()).collect();
+    for spec in &config.explicit {
+        let setting = sweep::parse_setting(spec, 0).with_context(|| format!("--set {spec}"))?;
+        rules.push(setting.rule.name);
+    }
+    if let Some(spec) = &config.histogram {
+        let (rule, value) = parse_histogram(spec)?;
+        anyhow::ensure!(
+            rules.iter().any(|r| r == rule),
+            "--histogram {spec}: rule `{rule}` is not in the sweep (rules: {})",
+            rules.join(", ")
+        );
+        if let Some(v) = value {
+            RuleSpec::new(rule, Some(v)).map_err(|e| anyhow::anyhow!("--histogram {spec}: {e}"))?;
+        }
+    }
+    Ok(grids)
 }
 
 /// Quantize every query once (timed), as the sweep replays it.
@@ -246,18 +375,18 @@ fn seconds_since(t: &mut Instant) -> f64 {
     s
 }
 
+/// One vocabulary's queries and their quantization costs.
+struct SeedWords {
+    queries: Vec<Query>,
+    costs: Vec<QueryCost>,
+}
+
 /// Run the whole evaluation and write its outputs into `config.out`.
 pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     let started = Instant::now();
     let mut clock = Instant::now();
     let mut stages = Stages::default();
-    anyhow::ensure!(config.runs >= 1, "--runs must be at least 1");
-    anyhow::ensure!(!config.warmups.is_empty(), "give at least one warm-up");
-    anyhow::ensure!(
-        config.targets.iter().all(|&t| t > 0.0 && t <= 1.0),
-        "targets are fractions in (0, 1]"
-    );
-    let grids = resolve_rules(&config.rules)?;
+    let grids = validate(config)?;
     let dataset = Dataset::open(&config.dataset)?;
     let given_vocab = config
         .vocab
@@ -298,27 +427,46 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         })
         .transpose()?;
     stages.extract_s = seconds_since(&mut clock);
+    let machine = MachineInfo::here(config.opencv.clone(), map_desc.hash(), query_desc.hash());
+    let counts: Vec<usize> = (0..query_desc.len())
+        .map(|q| query_desc.image(q).map_or(0, |d| d.nrows()))
+        .collect();
+    let auto = auto_warmup(&counts);
+    let mut warmups: Vec<usize> = Vec::new();
+    for w in &config.warmups {
+        let w = w.resolve(auto);
+        if !warmups.contains(&w) {
+            warmups.push(w);
+        }
+    }
 
-    let vocab = match given_vocab {
-        Some(v) => v,
-        None => cache::vocabulary(
-            &config.cache,
-            &map_desc,
-            &KmeansConfig {
-                k: config.words,
-                seed: config.seed,
-                ..KmeansConfig::default()
-            },
-        )?,
+    let vocabs: Vec<Vocabulary> = match given_vocab {
+        Some(v) => vec![v],
+        None => config
+            .seeds
+            .iter()
+            .map(|&seed| {
+                cache::vocabulary(
+                    &config.cache,
+                    &map_desc,
+                    &KmeansConfig {
+                        k: config.words,
+                        seed,
+                        ..KmeansConfig::default()
+                    },
+                )
+            })
+            .collect::<anyhow::Result<_>>()?,
     };
+    let seeds: Vec<u64> = vocabs.iter().map(|v| v.meta().seed).collect();
     stages.vocabulary_s = seconds_since(&mut clock);
-    let map = cache::map_index(&config.cache, &vocab, &map_desc, &dataset.name)?;
+    let maps: Vec<MapIndex> = vocabs
+        .iter()
+        .map(|v| cache::map_index(&config.cache, v, &map_desc, &dataset.name))
+        .collect::<anyhow::Result<_>>()?;
     stages.map_s = seconds_since(&mut clock);
-
     // one OpenCV thread per query: the sweep already runs one query per core
     crate::features::set_opencv_threads(1);
-    let quantizer = vocab.exact_quantizer();
-    let (mut queries, costs) = quantize_queries(&query_desc, &quantizer, "quantizing queries");
     // Geometric verification as the service does it: for the `verified`
     // stop always, for re-ranking in the `+verify` settings.
     let verify_params = config.verify.clone().unwrap_or_default();
@@ -326,34 +474,52 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         fit: Box::new(crate::features::fit::OpenCvFit::new(verify_params.fit())),
         params: verify_params.clone(),
     });
-    for q in &mut queries {
-        q.geometry = Some(geometry.clone());
-    }
-    let whole = whole_desc
-        .as_ref()
-        .map(|d| quantize_queries(d, &quantizer, "quantizing whole queries"));
+    let quantize = |set: &cache::DescriptorSet, v: &Vocabulary, what: String| {
+        let (queries, costs) = quantize_queries(set, &v.exact_quantizer(), &what);
+        SeedWords { queries, costs }
+    };
+    let per_seed: Vec<SeedWords> = vocabs
+        .iter()
+        .zip(&seeds)
+        .map(|(v, s)| {
+            let mut words = quantize(&query_desc, v, format!("quantizing (seed {s})"));
+            for q in &mut words.queries {
+                q.geometry = Some(geometry.clone());
+            }
+            words
+        })
+        .collect();
+    let whole: Option<Vec<SeedWords>> = whole_desc.as_ref().map(|d| {
+        vocabs
+            .iter()
+            .zip(&seeds)
+            .map(|(v, s)| quantize(d, v, format!("quantizing whole queries (seed {s})")))
+            .collect()
+    });
     stages.quantize_s = seconds_since(&mut clock);
 
+    // The grids are calibrated once, on the first vocabulary, so every seed
+    // runs the same settings.
     let calibrated = grids
         .iter()
         .filter(|g| matches!(g.grid, sweep::Grid::Calibrated { .. }))
         .count();
     let bar = progress_bar(
-        (calibrated * config.warmups.len() * config.targets.len()) as u64,
+        (calibrated * warmups.len() * config.targets.len()) as u64,
         "calibrating grids",
     );
     let (mut settings, calibrations) = sweep::plan(
-        &map,
-        &queries,
+        &maps[0],
+        &per_seed[0].queries,
         &grids,
-        &config.warmups,
+        &warmups,
         &config.targets,
         &bar,
     )?;
     bar.finish_and_clear();
     let mut explicit = Vec::with_capacity(config.explicit.len());
     for spec in &config.explicit {
-        let setting = sweep::parse_setting(spec, config.warmups[0])?;
+        let setting = sweep::parse_setting(spec, warmups[0])?;
         let index = settings
             .iter()
             .position(|s| s.rule == setting.rule && s.min_features == setting.min_features)
@@ -379,49 +545,110 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     stages.calibrate_s = seconds_since(&mut clock);
     tracing::info!(
         settings = settings.len(),
+        seeds = seeds.len(),
         runs = config.runs,
-        queries = queries.len(),
+        queries = counts.len(),
         "sweeping"
     );
 
     let top_n = summary::TOP_N.iter().copied().max().unwrap_or(10);
-    let bar = progress_bar(queries.len() as u64, "sweeping");
-    let outcomes = sweep::run_all(&map, &queries, &settings, config.runs, top_n, &bar);
+    let bar = progress_bar((counts.len() * seeds.len()) as u64, "sweeping");
+    let outcomes: Vec<Vec<Vec<Vec<Outcome>>>> = maps
+        .iter()
+        .zip(&per_seed)
+        .map(|(map, q)| sweep::run_all(map, &q.queries, &settings, config.runs, top_n, &bar))
+        .collect();
     bar.finish_and_clear();
-    let tiles_total: Vec<usize> = queries.iter().map(|q| q.tiles.len().max(1)).collect();
-    let full_ms = summary::request_ms(&outcomes[0], &costs);
+    let tiles_total: Vec<usize> = per_seed[0]
+        .queries
+        .iter()
+        .map(|q| q.tiles.len().max(1))
+        .collect();
+    // the full search's request times, per seed: what time shares are of
+    let full_ms: Vec<Vec<Vec<f64>>> = outcomes
+        .iter()
+        .zip(&per_seed)
+        .map(|(o, q)| summary::request_ms(&o[0], &q.costs))
+        .collect();
     let summaries: Vec<SettingSummary> = settings
         .par_iter()
-        .zip(&outcomes)
-        .map(|(s, o)| summary::summarize(s, o, &dataset.truth, &costs, &tiles_total, &full_ms))
+        .enumerate()
+        .map(|(i, s)| {
+            let by_seed: Vec<SeedOutcomes<'_>> = outcomes
+                .iter()
+                .zip(&per_seed)
+                .zip(&full_ms)
+                .map(|((o, q), full)| SeedOutcomes {
+                    runs: &o[i],
+                    costs: &q.costs,
+                    full_ms: full,
+                })
+                .collect();
+            summary::summarize(s, &by_seed, &dataset.truth, &tiles_total)
+        })
         .collect();
     // The full search on the queries extracted whole: what tiling changes.
-    let whole_image = whole.map(|(queries, costs)| {
-        let bar = progress_bar(queries.len() as u64, "sweeping whole queries");
-        let o = sweep::run_all(&map, &queries, &settings[..1], config.runs, top_n, &bar);
+    let whole_image = whole.map(|whole| {
+        let bar = progress_bar(
+            (counts.len() * seeds.len()) as u64,
+            "sweeping whole queries",
+        );
+        let runs: Vec<Vec<Vec<Outcome>>> = maps
+            .iter()
+            .zip(&whole)
+            .map(|(map, q)| {
+                let mut o =
+                    sweep::run_all(map, &q.queries, &settings[..1], config.runs, top_n, &bar);
+                o.swap_remove(0)
+            })
+            .collect();
         bar.finish_and_clear();
-        let ones = vec![1; queries.len()];
-        let mut s =
-            summary::summarize(&settings[0], &o[0], &dataset.truth, &costs, &ones, &full_ms);
+        let by_seed: Vec<SeedOutcomes<'_>> = runs
+            .iter()
+            .zip(&whole)
+            .zip(&full_ms)
+            .map(|((o, q), full)| SeedOutcomes {
+                runs: o,
+                costs: &q.costs,
+                full_ms: full,
+            })
+            .collect();
+        let ones = vec![1; counts.len()];
+        let mut s = summary::summarize(&settings[0], &by_seed, &dataset.truth, &ones);
         s.label = format!("{} (whole image)", s.label);
         s
     });
     stages.sweep_s = seconds_since(&mut clock);
 
-    let recommendation = recommend::recommend(&summaries, config.tolerance);
+    let chance_at_1 = recommend::chance_recall(&dataset.truth, dataset.map.len(), 1);
+    let (recommendation, no_recommendation) =
+        match recommend::recommend(&summaries, config.tolerance, chance_at_1) {
+            Ok(r) => (Some(r), None),
+            Err(why) => (None, Some(why)),
+        };
     let rules: Vec<String> = grids.iter().map(|g| g.rule.to_owned()).collect();
     let equal_recall = equal_recall::equal_recall(
         &summaries,
         &rules,
         &equal_recall::tolerances(config.tolerance),
+        Criterion::Precision90,
     );
-    let main_warmup = config.warmups[0];
+    let equal_recall_plain = equal_recall::equal_recall(
+        &summaries,
+        &rules,
+        &[equal_recall::PLAIN_TOLERANCE],
+        Criterion::PlainRecall,
+    );
+    let main_warmup = warmups[0];
     let histogram_index = match &config.histogram {
         Some(spec) => Some(pick_setting(&summaries, spec, main_warmup)?),
         None => recommendation.as_ref().map(|r| r.index),
     };
     let histogram = histogram_index.map(|index| {
-        let values = summary::fractions(&outcomes[index]);
+        let values: Vec<f64> = outcomes
+            .iter()
+            .flat_map(|o| summary::fractions(&o[index]))
+            .collect();
         let q = timing::quantiles(&values);
         HistogramInfo {
             index,
@@ -445,8 +672,8 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
                     verify::row(
                         &summaries[without].label,
                         without,
-                        &outcomes[without],
-                        &outcomes[with],
+                        &outcomes[0][without],
+                        &outcomes[0][with],
                         &dataset.truth,
                     )
                 })
@@ -454,12 +681,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         });
     stages.verify_s = seconds_since(&mut clock);
 
-    let mean_features = metrics::mean(
-        &queries
-            .iter()
-            .map(|q| q.words.len() as f64)
-            .collect::<Vec<_>>(),
-    );
+    let mean_features = metrics::mean(&counts.iter().map(|&n| n as f64).collect::<Vec<_>>());
     stages.total_s = started.elapsed().as_secs_f64();
     let report = Report {
         command: config.command.clone(),
@@ -471,12 +693,15 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             with_match: dataset.queries_with_match(),
             ground_truth_pairs: dataset.truth.iter().map(|t| t.len()).sum(),
             mean_features,
+            median_features: median_features(&counts),
+            chance_recall_at_1: chance_at_1,
         },
         config: ConfigInfo {
             runs: config.runs,
-            seed: config.seed,
+            seeds,
             rules,
-            warmups: config.warmups.clone(),
+            warmups,
+            auto_warmup: auto,
             targets: config.targets.clone(),
             precision: summary::PRECISION,
             top_n: summary::TOP_N,
@@ -484,19 +709,39 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             extract,
             tiles: config.tiles.to_string(),
         },
-        vocabulary: VocabularyInfo {
-            words: vocab.words(),
-            hash: vocab.hash_hex(),
-        },
+        machine,
+        vocabularies: vocabs
+            .iter()
+            .map(|v| VocabularyInfo {
+                seed: v.meta().seed,
+                words: v.words(),
+                hash: v.hash_hex(),
+            })
+            .collect(),
         stages,
         calibrations,
         settings: summaries,
         explicit,
         recommendation,
+        no_recommendation,
         equal_recall,
+        equal_recall_plain,
         histogram,
         whole_image,
         verification,
+        per_query: PerQuery {
+            queries: dataset.queries.iter().map(|q| q.name.clone()).collect(),
+            truth: dataset
+                .truth
+                .iter()
+                .map(|t| {
+                    let mut ids: Vec<u32> = t.iter().copied().collect();
+                    ids.sort_unstable();
+                    ids
+                })
+                .collect(),
+            outcomes,
+        },
     };
     write_outputs(&report, &config.out, config.plots)?;
     Ok(report)

@@ -1,7 +1,10 @@
-//! The numbers of one setting: the metrics of each Monte Carlo run (recall at
-//! 90 % precision is computed per run, then averaged over runs), their mean
-//! and spread, the fraction of features used and the per-stage time of a
-//! query. Tables, CSV, JSON and plots all read these.
+//! The numbers of one setting: the metrics of each Monte Carlo run on each
+//! vocabulary (recall at 90 % precision is computed per run, then averaged
+//! over runs), their mean and the two spreads kept apart — over vocabulary
+//! seeds (k-means draws) and over runs (random feature orders) — with each
+//! seed's figure for decisions on the worst seed, the fraction of features
+//! used and the per-stage time of a query. Tables, CSV, JSON and plots all
+//! read these.
 
 use super::metrics::{self, Answer};
 use super::sweep::{Outcome, Setting};
@@ -14,19 +17,45 @@ pub const TOP_N: [usize; 3] = [3, 5, 10];
 /// The precision the tables' recall is read at.
 pub const PRECISION: f64 = 0.9;
 
-/// Mean and sample standard deviation over runs.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+/// One figure of a setting over vocabulary seeds and runs.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Stat {
+    /// Mean over vocabulary seeds of each seed's mean over runs.
     pub mean: f64,
+    /// Sample standard deviation over vocabulary seeds of those means (0 with
+    /// one seed).
     pub std: f64,
+    /// The Monte Carlo spread: sample standard deviation over runs (random
+    /// feature orders), averaged over seeds.
+    pub runs_std: f64,
+    /// Each seed's mean over runs, in the order of the seeds.
+    pub per_seed: Vec<f64>,
 }
 
 impl Stat {
-    pub fn of(values: &[f64]) -> Self {
+    /// From `values[seed][run]`.
+    pub fn of(values: &[Vec<f64>]) -> Self {
+        let per_seed: Vec<f64> = values.iter().map(|v| metrics::mean(v)).collect();
+        let spreads: Vec<f64> = values.iter().map(|v| metrics::std_dev(v)).collect();
         Self {
-            mean: metrics::mean(values),
-            std: metrics::std_dev(values),
+            mean: metrics::mean(&per_seed),
+            std: metrics::std_dev(&per_seed),
+            runs_std: metrics::mean(&spreads),
+            per_seed,
         }
+    }
+
+    /// The lowest seed's figure (the worst, for a recall).
+    pub fn lowest(&self) -> f64 {
+        self.per_seed.iter().copied().fold(f64::INFINITY, f64::min)
+    }
+
+    /// The highest seed's figure (the worst, for a cost).
+    pub fn highest(&self) -> f64 {
+        self.per_seed
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max)
     }
 }
 
@@ -105,28 +134,30 @@ impl TimeShare {
 pub struct SettingSummary {
     pub setting: Setting,
     pub label: String,
-    /// Recall at 90 % precision for each n of [`TOP_N`], over runs.
+    /// Recall at 90 % precision for each n of [`TOP_N`].
     pub recall90: [Stat; 3],
     pub recall_at_1: Stat,
     pub recall_at_5: Stat,
     pub fraction: Stat,
-    /// Per-query stage times over all queries and runs, in milliseconds.
+    /// Per-query stage times over all seeds, queries and runs, in milliseconds.
     pub time_ms: StageTimes,
-    /// Request time as a fraction of the full search's on the same query.
+    /// Request time as a fraction of the full search's on the same query
+    /// (and vocabulary).
     pub time_share: TimeShare,
     /// Mean fraction of the image's tiles extracted.
     pub tiles: f64,
-    pub runs: Vec<RunMetrics>,
+    /// The metrics of every run: `runs[seed][run]`.
+    pub runs: Vec<Vec<RunMetrics>>,
 }
 
 impl SettingSummary {
     /// Recall at 90 % precision with `n` candidates (n from [`TOP_N`]).
-    pub fn recall90_at(&self, n: usize) -> Stat {
+    pub fn recall90_at(&self, n: usize) -> &Stat {
         let i = TOP_N
             .iter()
             .position(|&t| t == n)
             .expect("n is one of TOP_N");
-        self.recall90[i]
+        &self.recall90[i]
     }
 }
 
@@ -142,17 +173,19 @@ impl SettingSummary {
         recall_at_1: f64,
         fraction: f64,
     ) -> Self {
-        let setting = Setting {
-            rule: crate::search::RuleSpec::new(rule, parameter).expect("a valid rule"),
+        let setting = Setting::new(
+            crate::search::RuleSpec::new(rule, parameter).expect("a valid rule"),
             min_features,
-            target: None,
-            verify: false,
+        );
+        let stat = |mean| Stat {
+            mean,
+            per_seed: vec![mean],
+            ..Stat::default()
         };
-        let stat = |mean| Stat { mean, std: 0.0 };
         Self {
             label: setting.label(),
             setting,
-            recall90: [stat(recall90); 3],
+            recall90: std::array::from_fn(|_| stat(recall90)),
             recall_at_1: stat(recall_at_1),
             recall_at_5: stat(recall_at_1),
             fraction: stat(fraction),
@@ -185,28 +218,55 @@ pub fn run_metrics(outcomes: &[Outcome], truth: &[HashSet<u32>]) -> RunMetrics {
     }
 }
 
-/// Summarise a setting from its outcomes `runs[run][query]`.
+/// One vocabulary's outcomes of a setting, `runs[run][query]`, and what
+/// each query costs on that vocabulary.
+#[derive(Debug, Clone, Copy)]
+pub struct SeedOutcomes<'a> {
+    pub runs: &'a [Vec<Outcome>],
+    pub costs: &'a [QueryCost],
+    /// The full search's request time on this vocabulary, `[run][query]`
+    /// (see [`request_ms`]).
+    pub full_ms: &'a [Vec<f64>],
+}
+
+/// Summarise a setting from its outcomes on each vocabulary seed.
 pub fn summarize(
     setting: &Setting,
-    runs: &[Vec<Outcome>],
+    seeds: &[SeedOutcomes<'_>],
     truth: &[HashSet<u32>],
-    costs: &[QueryCost],
     tiles_total: &[usize],
-    full_ms: &[Vec<f64>],
 ) -> SettingSummary {
-    let per_run: Vec<RunMetrics> = runs.iter().map(|r| run_metrics(r, truth)).collect();
-    let over =
-        |f: &dyn Fn(&RunMetrics) -> f64| Stat::of(&per_run.iter().map(f).collect::<Vec<_>>());
-    let samples: Vec<StageSample> = runs
+    let per_run: Vec<Vec<RunMetrics>> = seeds
         .iter()
-        .flat_map(|r| r.iter().zip(costs))
+        .map(|s| s.runs.iter().map(|r| run_metrics(r, truth)).collect())
+        .collect();
+    let over = |f: &dyn Fn(&RunMetrics) -> f64| {
+        Stat::of(
+            &per_run
+                .iter()
+                .map(|runs| runs.iter().map(f).collect())
+                .collect::<Vec<Vec<f64>>>(),
+        )
+    };
+    let samples: Vec<StageSample> = seeds
+        .iter()
+        .flat_map(|s| s.runs.iter().flat_map(|r| r.iter().zip(s.costs)))
         .map(|(o, c)| stage_sample(o, c))
         .collect();
-    let tile_shares: Vec<f64> = runs
+    let tile_shares: Vec<f64> = seeds
         .iter()
-        .flat_map(|r| r.iter().zip(tiles_total))
+        .flat_map(|s| s.runs.iter().flat_map(|r| r.iter().zip(tiles_total)))
         .map(|(o, &n)| o.tiles as f64 / n.max(1) as f64)
         .collect();
+    // request times of every seed's runs, against that seed's full search
+    let (ms, full): (Vec<Vec<f64>>, Vec<Vec<f64>>) = seeds
+        .iter()
+        .flat_map(|s| {
+            request_ms(s.runs, s.costs)
+                .into_iter()
+                .zip(s.full_ms.iter().cloned())
+        })
+        .unzip();
     SettingSummary {
         setting: setting.clone(),
         label: setting.label(),
@@ -215,7 +275,7 @@ pub fn summarize(
         recall_at_5: over(&|m| m.recall_at_5),
         fraction: over(&|m| m.fraction),
         time_ms: timing::summarize(&samples),
-        time_share: TimeShare::of(&request_ms(runs, costs), full_ms),
+        time_share: TimeShare::of(&ms, &full),
         tiles: metrics::mean(&tile_shares),
         runs: per_run,
     }
@@ -239,6 +299,7 @@ mod tests {
                 .collect(),
             used,
             total: 100,
+            stop: crate::search::StopKind::Rule,
             vote_ms: 1.0,
             extract_ms: 10.0,
             verify_ms: 0.0,
@@ -257,25 +318,27 @@ mod tests {
             vec![outcome(&[(1, 0.9)], 50), outcome(&[(2, 0.8)], 30)],
             vec![outcome(&[(1, 0.5)], 100), outcome(&[(7, 0.8)], 20)],
         ];
-        let setting = Setting {
-            rule: RuleSpec::new("none", None).unwrap(),
-            min_features: 0,
-            target: None,
-            verify: false,
-        };
+        let setting = Setting::new(RuleSpec::new("none", None).unwrap(), 0);
         let costs = [QueryCost {
             quantize_ms_per_feature: 0.1,
         }; 2];
         // the full search took 21 ms on every query (10 + 100 × 0.1 + 1)
         let full = vec![vec![21.0; 2]; 2];
-        let s = summarize(&setting, &runs, &truth, &costs, &[1, 1], &full);
-        assert_eq!(s.runs[0].recall90, [1.0; 3]);
-        assert_eq!(s.runs[1].recall90, [0.0; 3]);
+        let one = [SeedOutcomes {
+            runs: &runs,
+            costs: &costs,
+            full_ms: &full,
+        }];
+        let s = summarize(&setting, &one, &truth, &[1, 1]);
+        assert_eq!(s.runs[0][0].recall90, [1.0; 3]);
+        assert_eq!(s.runs[0][1].recall90, [0.0; 3]);
         assert_eq!(s.recall90_at(5).mean, 0.5);
-        assert!((s.recall90_at(5).std - 0.5f64.sqrt()).abs() < 1e-12);
-        assert_eq!(s.runs[1].recall_at_1, 0.5);
+        // one seed: no spread over seeds, the Monte Carlo spread over runs
+        assert_eq!(s.recall90_at(5).std, 0.0);
+        assert!((s.recall90_at(5).runs_std - 0.5f64.sqrt()).abs() < 1e-12);
+        assert_eq!(s.runs[0][1].recall_at_1, 0.5);
         assert_eq!(s.recall_at_5.mean, 0.75);
-        assert_eq!(s.runs[0].fraction, 0.4);
+        assert_eq!(s.runs[0][0].fraction, 0.4);
         assert!((s.fraction.mean - 0.5).abs() < 1e-12);
         // Quantize time is charged per feature used: 20..100 features.
         assert_eq!(s.time_ms.quantize.p95, 10.0);
@@ -284,5 +347,26 @@ mod tests {
         assert!((s.time_share.mean - (16.0 + 14.0 + 21.0 + 13.0) / 4.0 / 21.0).abs() < 1e-12);
         assert_eq!(s.tiles, 1.0);
         assert_eq!(fractions(&runs), [0.5, 0.3, 1.0, 0.2]);
+
+        // A second vocabulary on which run 1 is right too: the seeds' means
+        // (0.5 and 1.0) give the mean and the spread over seeds; the spread
+        // over runs is averaged (√0.5 and 0).
+        let better = vec![runs[0].clone(), runs[0].clone()];
+        let two = [
+            one[0],
+            SeedOutcomes {
+                runs: &better,
+                costs: &costs,
+                full_ms: &full,
+            },
+        ];
+        let s = summarize(&setting, &two, &truth, &[1, 1]);
+        let r = s.recall90_at(5);
+        assert_eq!(r.per_seed, [0.5, 1.0]);
+        assert_eq!(r.mean, 0.75);
+        assert!((r.std - 0.125f64.sqrt()).abs() < 1e-12);
+        assert!((r.runs_std - 0.5f64.sqrt() / 2.0).abs() < 1e-12);
+        assert_eq!((r.lowest(), r.highest()), (0.5, 1.0));
+        assert_eq!(s.runs.len(), 2);
     }
 }

@@ -4,11 +4,12 @@
 //! and query on pre-quantized words.
 
 use super::tiles::Query;
+use crate::calibrate::median_features;
 use crate::index::MapIndex;
-use crate::search::{Ranked, RuleSpec, SearchOptions, search_words};
+use crate::search::{Ranked, RuleSpec, SearchOptions, StopKind, search_words};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Serialize, Serializer};
 
 /// How a rule's parameter values are chosen.
 #[derive(Debug, Clone, Copy)]
@@ -115,9 +116,27 @@ pub struct Setting {
     pub target: Option<f64>,
     /// Candidates re-ranked by geometric verification.
     pub verify: bool,
+    /// Why this grid point does not measure the rule (calibration hit a
+    /// search bound, or the warm-up leaves the rule unconsulted): such points
+    /// are shown, marked, but kept out of the equal-recall tables and the
+    /// recommendation.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub degenerate: Option<String>,
 }
 
 impl Setting {
+    /// A setting at warm-up `min_features`, not calibrated; verified when
+    /// the rule is a geometric one.
+    pub fn new(rule: RuleSpec, min_features: usize) -> Self {
+        Self {
+            verify: rule.info().geometric,
+            rule,
+            min_features,
+            target: None,
+            degenerate: None,
+        }
+    }
+
     /// The rule's parameter, for rules that take one.
     pub fn parameter(&self) -> Option<f64> {
         self.rule.parameter_name().map(|_| self.rule.parameter)
@@ -173,13 +192,10 @@ pub fn parse_setting(spec: &str, warmup: usize) -> anyhow::Result<Setting> {
         ),
         None => (body.trim(), None),
     };
-    let rule = RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?;
-    Ok(Setting {
-        verify: rule.info().geometric,
-        rule,
+    Ok(Setting::new(
+        RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?,
         min_features,
-        target: None,
-    })
+    ))
 }
 
 /// A parameter value as tables show it (up to 3 significant digits).
@@ -190,11 +206,22 @@ pub fn format_parameter(p: f64) -> String {
 
 /// `v` rounded to `digits` significant digits.
 pub fn round_significant(v: f64, digits: i32) -> f64 {
+    round_with(v, digits, f64::round)
+}
+
+/// `v` rounded to `digits` significant digits, upwards (`up`) or downwards.
+pub fn round_significant_toward(v: f64, digits: i32, up: bool) -> f64 {
+    round_with(v, digits, if up { f64::ceil } else { f64::floor })
+}
+
+fn round_with(v: f64, digits: i32, round: fn(f64) -> f64) -> f64 {
     if v == 0.0 || !v.is_finite() {
         return v;
     }
     let scale = 10f64.powi(digits - 1 - v.abs().log10().floor() as i32);
-    (v * scale).round() / scale
+    let r = round(v * scale) / scale;
+    // dividing back can land one ulp off: keep the shortest form
+    format!("{r:.12e}").parse().unwrap_or(r)
 }
 
 /// The run number the calibration pass uses: its permutations are not those
@@ -207,22 +234,35 @@ pub fn seed(run: u32, query: usize) -> u64 {
     ((run as u64) << 32) | query as u64
 }
 
-/// The result of one search, kept for the metrics.
-#[derive(Debug, Clone)]
+/// The result of one search, kept for the metrics and written, per query,
+/// into `results.json` so it can be re-scored.
+#[derive(Debug, Clone, Serialize)]
 pub struct Outcome {
+    /// Ranked candidates as `[id, score]` pairs.
+    #[serde(serialize_with = "id_score_pairs")]
     pub candidates: Vec<Ranked>,
+    /// Features voted when the search ended: its stop point.
     pub used: u32,
     pub total: u32,
+    /// Why it ended.
+    pub stop: StopKind,
     /// Time spent voting (and checking the rule), in milliseconds.
+    #[serde(skip)]
     pub vote_ms: f32,
     /// Decoding and extracting the tiles extracted, in milliseconds.
+    #[serde(skip)]
     pub extract_ms: f32,
     /// Verifying the candidates after the search, in milliseconds.
+    #[serde(skip)]
     pub verify_ms: f32,
     /// Tiles extracted (1 for a query extracted whole).
     pub tiles: u16,
     /// The best candidate is geometrically verified.
     pub verified: bool,
+}
+
+fn id_score_pairs<S: Serializer>(list: &[Ranked], s: S) -> Result<S::Ok, S::Error> {
+    s.collect_seq(list.iter().map(|r| (r.id, r.score)))
 }
 
 impl Outcome {
@@ -249,6 +289,7 @@ pub fn search_one(
         candidates: o.candidates,
         used: o.features_used as u32,
         total: words.len() as u32,
+        stop: o.stop.kind,
         vote_ms: o.timings.vote.as_secs_f32() * 1e3,
         extract_ms: 0.0,
         verify_ms: 0.0,
@@ -270,6 +311,7 @@ pub fn search_query(
         candidates: r.outcome.candidates,
         used: r.outcome.features_used as u32,
         total: query.words.len() as u32,
+        stop: r.outcome.stop.kind,
         vote_ms: r.outcome.timings.vote.as_secs_f32() * 1e3,
         extract_ms: r.extract_ms as f32,
         verify_ms: r.verify_ms as f32,
@@ -297,6 +339,10 @@ pub struct Calibration {
     pub parameter: f64,
     /// Mean fraction it gave in the calibration run.
     pub fraction: f64,
+    /// Why the value does not measure the rule, if it does not (see
+    /// [`Setting::degenerate`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub degenerate: Option<String>,
 }
 
 /// Stop bisecting once the fraction is this close to the target.
@@ -376,7 +422,11 @@ pub fn bisect_edge(
 
 /// Parameters of `rule` (grid `Calibrated { lo, hi, whole }`) at warm-up
 /// `min_features` for each target fraction, rounded to 3 significant digits,
-/// from one calibration run over all queries.
+/// from one calibration run over all queries. A value is marked degenerate
+/// when the bisection ended on a bound of `[lo, hi]` (the target is out of
+/// the rule's reach: the value says nothing about the rule) or when the
+/// warm-up is at least the median query's feature count (the rule is not
+/// consulted on most queries).
 pub fn calibrate(
     map: &MapIndex,
     queries: &[Query],
@@ -387,12 +437,10 @@ pub fn calibrate(
     bar: &ProgressBar,
 ) -> anyhow::Result<Vec<Calibration>> {
     let setting = |p: f64| -> anyhow::Result<Setting> {
-        Ok(Setting {
-            rule: RuleSpec::new(rule, Some(p)).map_err(anyhow::Error::msg)?,
+        Ok(Setting::new(
+            RuleSpec::new(rule, Some(p)).map_err(anyhow::Error::msg)?,
             min_features,
-            target: None,
-            verify: false,
-        })
+        ))
     };
     setting(lo)?;
     setting(hi)?;
@@ -406,16 +454,39 @@ pub fn calibrate(
         memo.lock().expect("not poisoned").insert(p.to_bits(), v);
         v
     };
+    let lengths: Vec<usize> = queries.iter().map(|q| q.words.len()).collect();
+    let median = median_features(&lengths);
     let mut out = Vec::with_capacity(targets.len());
     for &target in targets {
-        let (p, _) = bisect(target, lo, hi, whole, &f);
-        let p = if whole { p } else { round_significant(p, 3) };
+        let (raw, _) = bisect(target, lo, hi, whole, &f);
+        let p = if whole {
+            raw
+        } else {
+            round_significant(raw, 3)
+        };
+        let fraction = f(p);
+        let degenerate = if min_features >= median {
+            Some(format!(
+                "warm-up {min_features} ≥ the median query's {median} features"
+            ))
+        } else if raw == lo || raw == hi {
+            Some(format!(
+                "target {:.0} % out of reach: bisection ended on the search bound {} ({:.1} % \
+                 of the features)",
+                100.0 * target,
+                format_parameter(raw),
+                100.0 * fraction
+            ))
+        } else {
+            None
+        };
         out.push(Calibration {
             rule: rule.to_owned(),
             min_features,
             target,
             parameter: p,
-            fraction: f(p),
+            fraction,
+            degenerate,
         });
         bar.inc(1);
     }
@@ -438,24 +509,10 @@ pub fn plan(
     let spec = |name: &str, p: Option<f64>| RuleSpec::new(name, p).map_err(anyhow::Error::msg);
     for g in grids {
         match g.grid {
-            Grid::Single => {
-                let rule = spec(g.rule, None)?;
-                settings.push(Setting {
-                    verify: rule.info().geometric,
-                    rule,
-                    min_features: first,
-                    target: None,
-                })
-            }
+            Grid::Single => settings.push(Setting::new(spec(g.rule, None)?, first)),
             Grid::Values(values) => {
                 for &v in values {
-                    let rule = spec(g.rule, Some(v))?;
-                    settings.push(Setting {
-                        verify: rule.info().geometric,
-                        rule,
-                        min_features: first,
-                        target: None,
-                    });
+                    settings.push(Setting::new(spec(g.rule, Some(v))?, first));
                 }
             }
             Grid::Calibrated { lo, hi, whole } => {
@@ -468,10 +525,9 @@ pub fn plan(
                         }
                         seen.push(c.parameter);
                         settings.push(Setting {
-                            rule: spec(g.rule, Some(c.parameter))?,
-                            min_features: w,
                             target: Some(c.target),
-                            verify: false,
+                            degenerate: c.degenerate.clone(),
+                            ..Setting::new(spec(g.rule, Some(c.parameter))?, w)
                         });
                     }
                     calibrations.extend(found);
@@ -567,6 +623,9 @@ mod tests {
     #[test]
     fn rounding_and_seeds() {
         assert_eq!(round_significant(0.012345, 3), 0.0123);
+        assert_eq!(round_significant_toward(0.012301, 3, true), 0.0124);
+        assert_eq!(round_significant_toward(0.012399, 3, false), 0.0123);
+        assert_eq!(round_significant_toward(742.2, 3, true), 743.0);
         assert_eq!(round_significant(98765.0, 3), 98800.0);
         assert_eq!(format_parameter(0.05), "0.05");
         assert_ne!(seed(0, 1), seed(1, 0));
@@ -604,18 +663,8 @@ mod tests {
             .map(|q| Query::whole((0..40).map(|i| ((i * 7 + q) % 8) as u32).collect()))
             .collect();
         let settings = vec![
-            Setting {
-                rule: RuleSpec::new("none", None).unwrap(),
-                min_features: 0,
-                target: None,
-                verify: false,
-            },
-            Setting {
-                rule: RuleSpec::new("fixed", Some(0.5)).unwrap(),
-                min_features: 0,
-                target: None,
-                verify: false,
-            },
+            Setting::new(RuleSpec::new("none", None).unwrap(), 0),
+            Setting::new(RuleSpec::new("fixed", Some(0.5)).unwrap(), 0),
         ];
         let bar = ProgressBar::hidden();
         let r = run_all(&map, &queries, &settings, 3, 2, &bar);
@@ -627,6 +676,46 @@ mod tests {
             assert!(run.iter().all(|o| o.used == 20 && o.candidates.len() <= 2));
         }
         assert_eq!(mean_fraction(&map, &queries, &settings[1], 0), 0.5);
+    }
+
+    #[test]
+    fn unreachable_targets_and_large_warm_ups_are_marked_degenerate() {
+        let map = toy_map();
+        let queries: Vec<Query> = (0..6)
+            .map(|q| Query::whole((0..40).map(|i| ((i * 5 + q * 3) % 8) as u32).collect()))
+            .collect();
+        let bar = ProgressBar::hidden();
+        // `fixed` cannot use less than 20 % when its range starts at 0.2:
+        // the bisection ends on that bound.
+        let found = calibrate(
+            &map,
+            &queries,
+            "fixed",
+            (0.2, 1.0, false),
+            0,
+            &[0.1, 0.5],
+            &bar,
+        )
+        .unwrap();
+        let why = found[0].degenerate.as_deref().unwrap();
+        assert!(why.contains("search bound 0.2"), "{why}");
+        assert_eq!(found[1].degenerate, None);
+        // A warm-up of all 40 features: every point is degenerate, and the
+        // plan carries the mark to its settings.
+        let (settings, _) = plan(
+            &map,
+            &queries,
+            &[rule_grid("stable-peak").unwrap()],
+            &[40],
+            &[0.5],
+            &bar,
+        )
+        .unwrap();
+        let why = settings[0].degenerate.as_deref().unwrap();
+        assert!(
+            why.contains("warm-up 40 ≥ the median query's 40 features"),
+            "{why}"
+        );
     }
 
     #[test]

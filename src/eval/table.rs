@@ -1,11 +1,15 @@
 //! Writing a report out: markdown tables in the layout of the paper's
 //! Tables I–IV (one per rule), the warm-up comparison and the time per
-//! stage, the features each rule needs at equal recall; a CSV with one row
-//! per setting, another with the equal-recall table; a JSON of every number.
+//! stage, the features each rule needs at equal recall (on recall at 90 %
+//! precision and on plain recall); a CSV with one row per setting, another
+//! with the equal-recall tables; a JSON of every number and every query's
+//! answers. A figure over several vocabulary seeds reads `mean ± std over
+//! seeds`; the spread over feature orders is a row of its own.
 
 use super::Report;
 use super::equal_recall::EqualRecall;
-use super::summary::{SettingSummary, TOP_N};
+use super::recommend::Criterion;
+use super::summary::{SettingSummary, Stat, TOP_N};
 use super::sweep::{BASELINE, format_parameter};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -13,6 +17,46 @@ use std::path::Path;
 /// A rate as a percentage with one decimal.
 fn pct(v: f64) -> String {
     format!("{:.1}", 100.0 * v)
+}
+
+/// A figure as a percentage: `mean ± std over seeds` with several seeds.
+fn pct_seeds(s: &Stat) -> String {
+    if s.per_seed.len() > 1 {
+        format!("{} ± {}", pct(s.mean), pct(s.std))
+    } else {
+        pct(s.mean)
+    }
+}
+
+/// A setting's name in column headers, marked † when degenerate.
+fn marked(s: &SettingSummary, name: String) -> String {
+    if s.setting.degenerate.is_some() {
+        format!("{name} †")
+    } else {
+        name
+    }
+}
+
+/// The footnote naming why each degenerate column is so.
+fn degenerate_note(columns: &[&SettingSummary]) -> String {
+    let notes: Vec<String> = columns
+        .iter()
+        .filter_map(|s| {
+            s.setting
+                .degenerate
+                .as_ref()
+                .map(|why| format!("`{}`: {why}", s.label))
+        })
+        .collect();
+    if notes.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "† degenerate grid point, left out of the equal-recall tables and the \
+             recommendation — {}.\n\n",
+            notes.join("; ")
+        )
+    }
 }
 
 /// Milliseconds with about three significant digits.
@@ -64,23 +108,19 @@ fn paper_rows(columns: &[&SettingSummary], parameter: &str) -> Vec<Vec<String>> 
         .iter()
         .map(|&n| {
             row(format!("recall top-{n} @90%P"), &|s| {
-                pct(s.recall90_at(n).mean)
+                pct_seeds(s.recall90_at(n))
             })
         })
         .collect();
-    rows.push(row("(std over runs, top-5)".into(), &|s| {
-        pct(s.recall90_at(5).std)
+    rows.push(row("(std over feature orders, top-5)".into(), &|s| {
+        pct(s.recall90_at(5).runs_std)
     }));
-    rows.push(row("% features".into(), &|s| pct(s.fraction.mean)));
+    rows.push(row("% features".into(), &|s| pct_seeds(&s.fraction)));
     rows.push(row(parameter.into(), &|s| {
         s.setting.parameter().map_or("–".into(), format_parameter)
     }));
-    rows.push(row("recall@1".into(), &|s| pct(s.recall_at_1.mean)));
-    rows.push(row("recall@5".into(), &|s| pct(s.recall_at_5.mean)));
-    rows.push(row(
-        "search ms (quantize + vote), median / p95".into(),
-        &|s| ms(s.time_ms.search),
-    ));
+    rows.push(row("recall@1".into(), &|s| pct_seeds(&s.recall_at_1)));
+    rows.push(row("recall@5".into(), &|s| pct_seeds(&s.recall_at_5)));
     rows
 }
 
@@ -90,28 +130,45 @@ pub fn markdown(report: &Report) -> String {
     let d = &report.dataset;
     let c = &report.config;
     let main = c.warmups.first().copied().unwrap_or(0);
+    let m = &report.machine;
+    let seeds: Vec<String> = c.seeds.iter().map(u64::to_string).collect();
     let _ = writeln!(s, "## {}\n", d.name);
     let _ = writeln!(s, "Command: `{}`\n", report.command);
     let _ = writeln!(
         s,
-        "{} map images, {} queries ({} with a match in the map), K = {} words, {} runs \
-         (random feature orders), {} features per query on average. Recall at 90 % precision \
-         is computed per run, then averaged over runs; all rates in %. Wall time {:.1} s \
-         (extract {:.1} s, vocabulary {:.1} s, map {:.1} s, quantize queries {:.1} s, \
-         calibrate {:.1} s, sweep {:.1} s).\n",
+        "Machine: {} ({} CPUs, {}); OpenCV {}, dispatching {}{}. Descriptor checksums: map \
+         `{}`, queries `{}` (SIFT's output depends on the instruction set: another CPU may \
+         give other figures).\n",
+        m.cpu_model,
+        m.cpus,
+        m.instruction_set,
+        m.opencv.version,
+        m.opencv.dispatched,
+        m.opencv_cpu_disable
+            .as_ref()
+            .map_or(String::new(), |v| format!(", OPENCV_CPU_DISABLE={v}")),
+        m.map_descriptors,
+        m.query_descriptors,
+    );
+    let _ = writeln!(
+        s,
+        "{} map images, {} queries ({} with a match in the map), K = {} words, {} vocabularies \
+         (k-means seeds {}), {} runs (random feature orders), {} features per query on average \
+         (median {}; warm-up `auto` = {}). Recall at 90 % precision is computed per run, then \
+         averaged over runs; a figure reads `mean ± std` over the vocabulary seeds, and the \
+         spread over feature orders is given apart; all rates in %. Times are measured, so \
+         they differ from run to run: they are all in the section \"Time per query and \
+         stage\" (and `results.csv`); every other figure is reproducible.\n",
         d.map_images,
         d.queries,
         d.with_match,
-        report.vocabulary.words,
+        report.vocabularies.first().map_or(0, |v| v.words),
+        c.seeds.len(),
+        seeds.join(", "),
         c.runs,
         d.mean_features.round(),
-        report.stages.total_s,
-        report.stages.extract_s,
-        report.stages.vocabulary_s,
-        report.stages.map_s,
-        report.stages.quantize_s,
-        report.stages.calibrate_s,
-        report.stages.sweep_s,
+        d.median_features,
+        c.auto_warmup,
     );
     let Some(base) = report
         .settings
@@ -138,40 +195,55 @@ pub fn markdown(report: &Report) -> String {
         let header: Vec<String> = ["".to_owned(), "full BoW".to_owned()]
             .into_iter()
             .chain(all[1..].iter().map(|x| {
-                x.setting.parameter().map_or(rule.clone(), |p| {
-                    format!("{parameter} {}", format_parameter(p))
-                })
+                marked(
+                    x,
+                    x.setting.parameter().map_or(rule.clone(), |p| {
+                        format!("{parameter} {}", format_parameter(p))
+                    }),
+                )
             }))
             .collect();
         let _ = writeln!(s, "### Rule `{rule}` (warm-up {main})\n");
         s += &markdown_table(&header, &paper_rows(&all, parameter));
         s += "\n";
+        s += &degenerate_note(&all);
     }
     s += &explicit_section(report, base);
     s += &warmup_section(report);
     s += &timing_section(report, base);
-    if let Some(e) = &report.equal_recall {
+    for e in [&report.equal_recall, &report.equal_recall_plain]
+        .into_iter()
+        .flatten()
+    {
         s += &equal_recall_section(e);
     }
     if let Some(r) = &report.recommendation {
         let _ = writeln!(
             s,
-            "### Recommended setting\n\nThe setting using the fewest features while losing at most \
-             {} points of the full search's recall top-5 @90%P ({}) and recall@1 ({}): \
-             **{}**, using {} % of the features with recall top-5 @90%P {} and recall@1 {}.\n",
+            "### Recommended setting\n\nThe setting whose worst vocabulary seed uses the fewest \
+             features while losing, on every seed, at most {} points of the full search's recall \
+             top-5 @90%P (mean {}) and recall@1 (mean {}); degenerate grid points are left out: \
+             **{}**, using {} % of the features (worst seed {} %) with recall top-5 @90%P {} and \
+             recall@1 {} (means over seeds; largest loss on one seed {} and {} points).\n",
             pct(r.tolerance),
             pct(r.baseline_recall90_top5),
             pct(r.baseline_recall_at_1),
             r.label,
             pct(r.fraction),
+            pct(r.worst_fraction),
             pct(r.recall90_top5),
             pct(r.recall_at_1),
+            pct(r.worst_loss[0]),
+            pct(r.worst_loss[1]),
         );
+    }
+    if let Some(why) = &report.no_recommendation {
+        let _ = writeln!(s, "### Recommended setting\n\nNone: {why}.\n");
     }
     if let Some(h) = &report.histogram {
         let _ = writeln!(
             s,
-            "Histogram of the fraction of features used per query ({} queries × runs) for \
+            "Histogram of the fraction of features used per query ({} seeds × queries × runs) for \
              **{}**: mean {} %, median {} %, 95th percentile {} %.\n",
             h.values,
             h.label,
@@ -194,18 +266,19 @@ fn explicit_section(report: &Report, base: &SettingSummary) -> String {
     let mut columns = vec![base];
     columns.extend(report.explicit.iter().map(|&i| &report.settings[i]));
     let header: Vec<String> = std::iter::once(String::new())
-        .chain(columns.iter().map(|c| c.label.clone()))
+        .chain(columns.iter().map(|c| marked(c, c.label.clone())))
         .collect();
     let mut rows = paper_rows(&columns, "parameter");
     rows.insert(
-        rows.len() - 3,
+        rows.len() - 2,
         std::iter::once("warm-up".to_owned())
             .chain(columns.iter().map(|c| c.setting.min_features.to_string()))
             .collect(),
     );
     format!(
-        "### Settings asked for\n\n{}\n",
-        markdown_table(&header, &rows)
+        "### Settings asked for\n\n{}\n{}",
+        markdown_table(&header, &rows),
+        degenerate_note(&columns)
     )
 }
 
@@ -248,14 +321,23 @@ fn warmup_section(report: &Report) -> String {
                     .collect::<Vec<_>>()
             };
             rows.push(row("parameter", &|x| {
-                x.setting.parameter().map_or("–".into(), format_parameter)
+                marked(
+                    x,
+                    x.setting.parameter().map_or("–".into(), format_parameter),
+                )
             }));
-            rows.push(row("% features", &|x| pct(x.fraction.mean)));
-            rows.push(row("recall top-5 @90%P", &|x| pct(x.recall90_at(5).mean)));
-            rows.push(row("recall@1", &|x| pct(x.recall_at_1.mean)));
+            rows.push(row("% features", &|x| pct_seeds(&x.fraction)));
+            rows.push(row("recall top-5 @90%P", &|x| pct_seeds(x.recall90_at(5))));
+            rows.push(row("recall@1", &|x| pct_seeds(&x.recall_at_1)));
         }
         s += &markdown_table(&header, &rows);
         s += "\n";
+        let points: Vec<&SettingSummary> = c
+            .warmups
+            .iter()
+            .flat_map(|&w| c.targets.iter().filter_map(move |&t| by_target(w, t)))
+            .collect();
+        s += &degenerate_note(&points);
     }
     s
 }
@@ -307,19 +389,31 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
             ]
         })
         .collect();
+    let t = &report.stages;
     format!(
-        "### Time per query and stage (ms, median / p95 over queries × runs)\n\n\
+        "### Time per query and stage (ms, median / p95 over seeds × queries × runs)\n\n\
+         Wall time {:.1} s (extract {:.1} s, vocabularies {:.1} s, maps {:.1} s, quantize \
+         queries {:.1} s, calibrate {:.1} s, sweep {:.1} s). \
          Extract = decode + SIFT, measured once per query while extracting; quantize = the \
          blocked exact quantizer's measured cost per feature × features used; vote = voting \
          and rule checks inside the search. Measured on this machine with all cores busy \
-         (queries run in parallel).\n\n{}\n",
+         (queries run in parallel); every setting's times are in `results.csv`.\n\n{}\n",
+        t.total_s,
+        t.extract_s,
+        t.vocabulary_s,
+        t.map_s,
+        t.quantize_s,
+        t.calibrate_s,
+        t.sweep_s,
         markdown_table(&header, &rows)
     )
 }
 
 /// The fewest features each rule and warm-up needs at each tolerance.
 fn equal_recall_section(e: &EqualRecall) -> String {
-    let mut header: Vec<String> = ["rule", "warm-up", "settings"].map(String::from).to_vec();
+    let mut header: Vec<String> = ["rule", "warm-up", "settings (degenerate)"]
+        .map(String::from)
+        .to_vec();
     for &t in &e.tolerances {
         header.push(format!("% features, loss ≤ {} pt", pct(t)));
         header.push(format!("setting, loss ≤ {} pt", pct(t)));
@@ -331,10 +425,18 @@ fn equal_recall_section(e: &EqualRecall) -> String {
             let mut row = vec![
                 format!("`{}`", r.rule),
                 r.min_features.to_string(),
-                r.settings.to_string(),
+                if r.degenerate > 0 {
+                    format!("{} ({})", r.settings, r.degenerate)
+                } else {
+                    r.settings.to_string()
+                },
             ];
             for c in &r.cheapest {
                 match c {
+                    Some(c) if c.worst_fraction > c.fraction + 5e-4 => row.extend([
+                        format!("{} (worst seed {})", pct(c.fraction), pct(c.worst_fraction)),
+                        c.label.clone(),
+                    ]),
                     Some(c) => row.extend([pct(c.fraction), c.label.clone()]),
                     None => row.extend(["–".to_owned(), "not reached".to_owned()]),
                 }
@@ -342,14 +444,21 @@ fn equal_recall_section(e: &EqualRecall) -> String {
             row
         })
         .collect();
+    let [a, b] = e.criterion.names();
+    let title = match e.criterion {
+        Criterion::Precision90 => "Features needed at equal recall",
+        Criterion::PlainRecall => "Features needed at equal plain recall",
+    };
     format!(
-        "### Features needed at equal recall\n\n\
-         For each rule and warm-up: the fewest features (mean % over queries and runs) among \
-         the settings evaluated (grid and `--set`) whose recall top-5 @90%P and recall@1 are \
-         both at most the given loss below the full search's ({} and {}); – when no setting \
-         is. No value between two settings is interpolated: the resolution is the grid's.\n\n{}\n",
-        pct(e.baseline_recall90_top5),
-        pct(e.baseline_recall_at_1),
+        "### {title}\n\n\
+         For each rule and warm-up: the fewest features (% over queries and runs, mean over \
+         seeds; chosen by its worst seed, shown when it differs) among the settings evaluated \
+         (grid and `--set`, degenerate grid points left out) whose {a} and {b} are both at \
+         most the given loss below the full search's (means {} and {}) on every vocabulary \
+         seed; – when no setting is. No value between two settings is interpolated: the \
+         resolution is the grid's.\n\n{}\n",
+        pct(e.baseline[0]),
+        pct(e.baseline[1]),
         markdown_table(&header, &rows)
     )
 }
@@ -369,17 +478,21 @@ fn csv_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::Result<()
         "parameter",
         "min_features",
         "target",
+        "degenerate",
+        "seeds",
         "runs",
     ]
     .map(String::from)
     .to_vec();
-    for n in TOP_N {
-        header.push(format!("recall90_top{n}_mean"));
-        header.push(format!("recall90_top{n}_std"));
-    }
-    for name in ["recall1", "recall5", "fraction"] {
-        header.push(format!("{name}_mean"));
-        header.push(format!("{name}_std"));
+    let names: Vec<String> = TOP_N
+        .iter()
+        .map(|n| format!("recall90_top{n}"))
+        .chain(["recall1", "recall5", "fraction"].map(String::from))
+        .collect();
+    for name in &names {
+        for part in ["mean", "seed_std", "runs_std", "worst"] {
+            header.push(format!("{name}_{part}"));
+        }
     }
     for stage in ["extract", "quantize", "vote", "search", "total"] {
         header.push(format!("{stage}_ms_median"));
@@ -395,15 +508,21 @@ fn csv_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::Result<()
                 .map_or(String::new(), |p| p.to_string()),
             s.setting.min_features.to_string(),
             s.setting.target.map_or(String::new(), |t| t.to_string()),
+            s.setting.degenerate.clone().unwrap_or_default(),
             s.runs.len().to_string(),
+            s.runs.first().map_or(0, Vec::len).to_string(),
         ];
         let stats = s
             .recall90
             .iter()
-            .chain([&s.recall_at_1, &s.recall_at_5, &s.fraction]);
-        for st in stats {
+            .chain([&s.recall_at_1, &s.recall_at_5])
+            .map(|st| (st, st.lowest()))
+            .chain([(&s.fraction, s.fraction.highest())]);
+        for (st, worst) in stats {
             r.push(format!("{:.6}", st.mean));
             r.push(format!("{:.6}", st.std));
+            r.push(format!("{:.6}", st.runs_std));
+            r.push(format!("{worst:.6}"));
         }
         let t = &s.time_ms;
         for q in [t.extract, t.quantize, t.vote, t.search, t.total] {
@@ -428,25 +547,39 @@ fn equal_recall_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::
     let mut w = csv::Writer::from_writer(out);
     w.write_record([
         "dataset",
+        "criterion",
         "rule",
         "min_features",
         "settings",
+        "degenerate",
         "tolerance",
         "setting",
         "fraction",
+        "worst_fraction",
     ])?;
-    if let Some(e) = &report.equal_recall {
+    for e in [&report.equal_recall, &report.equal_recall_plain]
+        .into_iter()
+        .flatten()
+    {
+        let criterion = match e.criterion {
+            Criterion::Precision90 => "recall90_top5+recall1",
+            Criterion::PlainRecall => "recall1+recall5",
+        };
         for r in &e.rows {
             for (t, c) in e.tolerances.iter().zip(&r.cheapest) {
                 w.write_record([
                     report.dataset.name.clone(),
+                    criterion.to_owned(),
                     r.rule.clone(),
                     r.min_features.to_string(),
                     r.settings.to_string(),
+                    r.degenerate.to_string(),
                     t.to_string(),
                     c.as_ref().map_or(String::new(), |c| c.label.clone()),
                     c.as_ref()
                         .map_or(String::new(), |c| format!("{:.6}", c.fraction)),
+                    c.as_ref()
+                        .map_or(String::new(), |c| format!("{:.6}", c.worst_fraction)),
                 ])?;
             }
         }
@@ -455,9 +588,10 @@ fn equal_recall_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::
     Ok(())
 }
 
-/// Every number, as JSON.
+/// Every number, and every query's answers, as JSON (compact: the answers
+/// make it large).
 pub fn write_json(report: &Report, path: &Path) -> anyhow::Result<()> {
-    let json = serde_json::to_vec_pretty(report)?;
+    let json = serde_json::to_vec(report)?;
     Ok(crate::store::write_atomic(path, |w| w.write_all(&json))?)
 }
 
@@ -479,12 +613,18 @@ mod tests {
         let rules: Vec<String> = ["none", "peak-mean", "relative", "hoeffding"]
             .map(String::from)
             .to_vec();
-        let e = equal_recall(&summaries, &rules, &tolerances(0.02)).unwrap();
+        let e = equal_recall(
+            &summaries,
+            &rules,
+            &tolerances(0.02),
+            Criterion::Precision90,
+        )
+        .unwrap();
         let md = equal_recall_section(&e);
         let lines: Vec<&str> = md.lines().filter(|l| l.starts_with('|')).collect();
         assert_eq!(
             lines[0],
-            "| rule | warm-up | settings | % features, loss ≤ 0.5 pt | setting, loss ≤ 0.5 pt \
+            "| rule | warm-up | settings (degenerate) | % features, loss ≤ 0.5 pt | setting, loss ≤ 0.5 pt \
              | % features, loss ≤ 2.0 pt | setting, loss ≤ 2.0 pt |"
         );
         assert_eq!(lines[2], "| `none` | 0 | 1 | 100.0 | none | 100.0 | none |");
@@ -500,6 +640,6 @@ mod tests {
             lines[5],
             "| `hoeffding` | 0 | 1 | 100.0 | hoeffding 0.5 | 100.0 | hoeffding 0.5 |"
         );
-        assert!(md.contains("full search's (91.5 and 66.0)"), "{md}");
+        assert!(md.contains("full search's (means 91.5 and 66.0)"), "{md}");
     }
 }

@@ -53,8 +53,8 @@ pub struct Replay {
     pub tiles: usize,
     /// Decoding and extracting them, in milliseconds.
     pub extract_ms: f64,
-    /// Verifying the candidates after the search, in milliseconds (checks of
-    /// the leader during the search count as voting time).
+    /// Checking the leader during the search and verifying the candidates
+    /// after it, in milliseconds.
     pub verify_ms: f64,
     /// The best candidate is geometrically verified.
     pub verified: bool,
@@ -128,7 +128,7 @@ impl Query {
             options,
             check.as_mut().map(|c| c as &mut dyn search::LeaderCheck),
         );
-        let mut verify_ms = 0.0;
+        let mut verify_ms = outcome.timings.verify.as_secs_f64() * 1e3;
         let mut verified = false;
         if verify && let Some(g) = &self.geometry {
             let started = Instant::now();
@@ -152,7 +152,7 @@ impl Query {
                     score: r.score(),
                 })
                 .collect();
-            verify_ms = started.elapsed().as_secs_f64() * 1e3;
+            verify_ms += started.elapsed().as_secs_f64() * 1e3;
         }
         let extract_ms = self.fixed_ms as f64
             + order[..used]

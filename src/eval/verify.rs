@@ -13,8 +13,8 @@ use crate::geometry::verify::VerifyParams;
 use serde::Serialize;
 use std::collections::HashSet;
 
-/// Recalls of one set of answers, over runs.
-#[derive(Debug, Clone, Copy, Serialize)]
+/// Recalls of one set of answers (one vocabulary), over runs.
+#[derive(Debug, Clone, Serialize)]
 pub struct Recalls {
     pub recall_at_1: Stat,
     pub recall_at_5: Stat,
@@ -68,7 +68,7 @@ fn recalls(runs: &[Vec<Outcome>], truth: &[HashSet<u32>]) -> Recalls {
             ]
         })
         .collect();
-    let over = |i: usize| Stat::of(&per_run.iter().map(|m| m[i]).collect::<Vec<_>>());
+    let over = |i: usize| Stat::of(&[per_run.iter().map(|m| m[i]).collect::<Vec<_>>()]);
     Recalls {
         recall_at_1: over(0),
         recall_at_5: over(1),
@@ -113,21 +113,22 @@ pub fn row(
         without: recalls(without, truth),
         with: recalls(with, truth),
         verify_ms: timing::quantiles(&ms),
-        verified_share: Stat::of(&shares.iter().map(|s| s.0).collect::<Vec<_>>()),
-        verified_precision: Stat::of(&shares.iter().map(|s| s.1).collect::<Vec<_>>()),
+        verified_share: Stat::of(&[shares.iter().map(|s| s.0).collect::<Vec<_>>()]),
+        verified_precision: Stat::of(&[shares.iter().map(|s| s.1).collect::<Vec<_>>()]),
     }
 }
 
 /// The markdown section of the verification pass.
 pub fn markdown(report: &VerificationReport) -> String {
     let p = &report.params;
-    let pct = |s: Stat| format!("{:.1} ± {:.1}", 100.0 * s.mean, 100.0 * s.std);
+    let pct = |s: &Stat| format!("{:.1} ± {:.1}", 100.0 * s.mean, 100.0 * s.runs_std);
     let mut out = format!(
         "## Geometric verification\n\n\
          The top {} vote candidates of each answer verified ({:?}, {:?}, inlier threshold {} px, \
          words giving more than {} pairs skipped) and re-ranked by inliers; the score is then \
-         the inlier count. A candidate is verified with at least {} inliers. Recalls in %, \
-         mean ± standard deviation over runs; verification time per query in ms.\n\n\
+         the inlier count. A candidate is verified with at least {} inliers. Recalls in %, on \
+         the first vocabulary, mean ± standard deviation over runs; verification time per \
+         query in ms.\n\n\
          | setting | verify | recall@1 | recall@5 | recall top-1 @90% P | recall top-5 @90% P | verify ms median | p95 | top verified | verified top correct |\n\
          | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
         p.top_k, p.model, p.estimator, p.threshold_px, p.max_word_pairs, p.min_inliers
@@ -137,7 +138,11 @@ pub fn markdown(report: &VerificationReport) -> String {
             let (time, share) = if name == "yes" {
                 (
                     format!("{:.2} | {:.2}", r.verify_ms.median, r.verify_ms.p95),
-                    format!("{} | {}", pct(r.verified_share), pct(r.verified_precision)),
+                    format!(
+                        "{} | {}",
+                        pct(&r.verified_share),
+                        pct(&r.verified_precision)
+                    ),
                 )
             } else {
                 ("– | –".to_owned(), "– | –".to_owned())
@@ -145,10 +150,10 @@ pub fn markdown(report: &VerificationReport) -> String {
             out += &format!(
                 "| {} | {name} | {} | {} | {} | {} | {time} | {share} |\n",
                 r.label,
-                pct(x.recall_at_1),
-                pct(x.recall_at_5),
-                pct(x.recall90_top1),
-                pct(x.recall90_top5),
+                pct(&x.recall_at_1),
+                pct(&x.recall_at_5),
+                pct(&x.recall90_top1),
+                pct(&x.recall90_top5),
             );
         }
     }

@@ -63,6 +63,25 @@ impl Default for SearchOptions {
     }
 }
 
+impl SearchOptions {
+    /// The rule every front end uses unless told otherwise.
+    pub const RECOMMENDED_RULE: &'static str = "relative";
+    /// Its parameter.
+    pub const RECOMMENDED_PARAMETER: f64 = 2.5;
+
+    /// The settings the service, the CLI and the configuration default to:
+    /// the rule, parameter and warm-up chosen by evaluation
+    /// (docs/results.md, "Recommended server defaults").
+    pub fn recommended() -> Self {
+        Self {
+            rule: RuleSpec::new(Self::RECOMMENDED_RULE, Some(Self::RECOMMENDED_PARAMETER))
+                .expect("a valid built-in rule"),
+            min_features: 100,
+            ..Self::default()
+        }
+    }
+}
+
 /// Why the search ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -89,6 +108,8 @@ pub struct StopInfo {
 pub struct SearchTimings {
     pub quantize: Duration,
     pub vote: Duration,
+    /// Geometric checks of a rule that verifies its leader.
+    pub verify: Duration,
 }
 
 /// The answer of one search.
@@ -219,23 +240,32 @@ impl<'m> Search<'m> {
             quantize(indices, &mut self.words[..indices.len()]);
             let quantized = Instant::now();
             self.timings.quantize += quantized - started;
+            let mut checking = Duration::ZERO;
             for (&i, &w) in indices.iter().zip(&self.words[..indices.len()]) {
                 self.voter.vote(w);
                 self.voted.push((offset + i, w));
-                if self.voter.tally().features >= self.options.min_features
-                    && let Some(why) = self.rule.check_with(
-                        &self.voter,
-                        &self.voted,
-                        leader_check
-                            .as_mut()
-                            .map(|c| &mut **c as &mut dyn LeaderCheck),
-                    )
-                {
+                if self.voter.tally().features < self.options.min_features {
+                    continue;
+                }
+                // A geometric check costs far more than a vote, and stopping
+                // inside a batch saves no extraction: only at a batch's end.
+                let at_end = self.voted.len() == self.fed;
+                let check = leader_check
+                    .as_mut()
+                    .filter(|_| at_end)
+                    .map(|c| &mut **c as &mut dyn LeaderCheck);
+                let started = at_end.then(Instant::now);
+                let why = self.rule.check_with(&self.voter, &self.voted, check);
+                if let Some(started) = started {
+                    checking += started.elapsed();
+                }
+                if let Some(why) = why {
                     self.stop = Some((StopKind::Rule, why));
                     break;
                 }
             }
-            self.timings.vote += quantized.elapsed();
+            self.timings.verify += checking;
+            self.timings.vote += quantized.elapsed().saturating_sub(checking);
             if self.stopped() {
                 return true;
             }

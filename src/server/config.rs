@@ -134,14 +134,13 @@ impl Default for FilesConfig {
 
 impl Default for SearchDefaults {
     fn default() -> Self {
-        // The rule, threshold and warm-up recommended by `bowloc eval` on both
-        // shared datasets (docs/results.md, "Recommended server defaults").
-        let o = SearchOptions::default();
+        // The same defaults as every front end's.
+        let o = SearchOptions::recommended();
         Self {
-            rule: "relative".into(),
-            threshold: Some(2.5),
+            threshold: o.rule.parameter_name().map(|_| o.rule.parameter),
+            rule: o.rule.name,
             top_n: o.top_n,
-            min_features: 100,
+            min_features: o.min_features,
             block: o.block,
             min_score: o.min_score,
             quantizer: "exact".into(),
@@ -451,7 +450,7 @@ mod tests {
             ("[search]\nrule = \"fastest\"\n", "fastest"),
             (
                 "[search]\nrule = \"fixed\"\n",
-                "fraction must lie in (0, 1]",
+                "fraction must be a number in (0, 1]",
             ),
             (
                 "[search]\nrule = \"none\"\nthreshold = 0.5\n",

@@ -8,7 +8,7 @@ use super::proto;
 use super::workers::PoolError;
 use crate::features::TileGrid;
 use crate::report::Localization;
-use crate::search::stop::{rule_info, rule_names};
+use crate::search::stop::{GENERIC_PARAMETER, parse_rule};
 use crate::search::{RuleSpec, SearchOptions};
 use axum::Json;
 use axum::body::Bytes;
@@ -37,12 +37,15 @@ pub struct LocalizeParams {
     /// stable-peak; also accepted for the parameter of any rule that takes one.
     #[param(value_type = Option<f64>)]
     pub threshold: Option<String>,
-    /// Confidence δ of rule hoeffding, in (0, 1).
+    /// Confidence δ of rules hoeffding and confident, in (0, 1).
     #[param(value_type = Option<f64>)]
     pub delta: Option<String>,
     /// Fraction of features of rule fixed, in (0, 1].
     #[param(value_type = Option<f64>)]
     pub fraction: Option<String>,
+    /// Inliers m of rule verified, a whole number in 4..=1000.
+    #[param(value_type = Option<u32>, minimum = 4, maximum = 1000)]
+    pub inliers: Option<String>,
     /// Seed of the feature permutation (0 to 2^64−1). Without it each request
     /// draws its own; the answer reports the seed used.
     #[param(value_type = Option<u64>)]
@@ -152,58 +155,27 @@ impl LocalizeParams {
         }
     }
 
-    /// The rule and its parameter.
+    /// The rule and its parameter, through the registry's one parser.
     fn rule(&self, default: &RuleSpec) -> Result<RuleSpec, ApiError> {
-        let given: Vec<(&str, &String)> = [
-            ("threshold", &self.threshold),
+        let mut given = Vec::new();
+        for (name, value) in [
+            (GENERIC_PARAMETER, &self.threshold),
             ("delta", &self.delta),
             ("fraction", &self.fraction),
-        ]
-        .into_iter()
-        .filter_map(|(n, v)| v.as_ref().map(|v| (n, v)))
-        .collect();
-        if given.len() > 1 {
-            return Err(ApiError::invalid_parameter(
-                given[1].0,
-                "give only one of threshold, delta and fraction",
-            ));
+            ("inliers", &self.inliers),
+        ] {
+            if let Some(v) = value {
+                given.push((name, number(name, v)?));
+            }
         }
         let name = self.rule.as_deref().unwrap_or(&default.name);
-        let info = rule_info(name).ok_or_else(|| {
-            ApiError::bad_request(
-                "unknown_rule",
-                format!(
-                    "unknown rule `{name}`; known rules: {}",
-                    rule_names().join(", ")
-                ),
-            )
-        })?;
-        let value = match given.first() {
-            None => None,
-            Some(&(what, v)) => {
-                let value = number(what, v)?;
-                match info.parameter {
-                    None => {
-                        return Err(ApiError::invalid_parameter(
-                            what,
-                            format!("rule `{name}` takes no parameter"),
-                        ));
-                    }
-                    Some(p) if what != "threshold" && what != p => {
-                        return Err(ApiError::invalid_parameter(
-                            what,
-                            format!("rule `{name}` takes a {p}, not a {what}"),
-                        ));
-                    }
-                    Some(_) => Some(value),
-                }
-            }
-        };
-        if value.is_none() && info.name == default.name {
+        if given.is_empty() && name == default.name {
             return Ok(default.clone());
         }
-        let what = given.first().map_or("rule", |g| g.0);
-        RuleSpec::new(info.name, value).map_err(|e| ApiError::invalid_parameter(what, e))
+        parse_rule(name, &given).map_err(|e| match e.parameter {
+            None => ApiError::bad_request("unknown_rule", e.message),
+            Some(p) => ApiError::invalid_parameter(&p, e.message),
+        })
     }
 }
 
@@ -566,7 +538,11 @@ mod tests {
                 "invalid_parameter",
                 "whole number",
             ),
-            ("threshold=1&delta=0.1", "invalid_parameter", "only one"),
+            (
+                "threshold=1&delta=0.1",
+                "invalid_parameter",
+                "give one parameter",
+            ),
             ("top_k=3", "invalid_parameter", "top_k"),
             ("top_n=1&top_n=2", "invalid_parameter", "top_n"),
         ];

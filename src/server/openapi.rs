@@ -74,8 +74,15 @@ fn describe_rules(doc: &mut utoipa::openapi::OpenApi) {
     };
     let rules: Vec<String> = RULES
         .iter()
-        .map(|r| match r.parameter {
-            Some(p) => format!("`{}` ({p}): {}", r.name, r.about),
+        .map(|r| match &r.parameter {
+            Some(p) => format!(
+                "`{}` ({}: {}, {}): {}",
+                r.name,
+                p.name,
+                p.meaning,
+                p.range.describe(),
+                r.about
+            ),
             None => format!("`{}`: {}", r.name, r.about),
         })
         .collect();

@@ -33,15 +33,21 @@
 //! most images and a large vote to a few), so the probabilistic bound is
 //! often the weaker of the two: `docs/results.md` measures both.
 
-use super::{RuleInfo, StopRule, unit_interval};
+use super::{Grid, Parameter, Range, RuleInfo, StopRule};
 use crate::search::vote::{Needs, Voter};
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "confident",
-    parameter: Some("delta"),
+    parameter: Some(Parameter {
+        name: "delta",
+        meaning: "δ, the chance of stopping on a leader that would lose",
+        range: Range::Open01,
+        example: 0.05,
+    }),
+    grid: Grid::Values(&[0.1, 0.05, 0.01]),
     about: "stop when the leader wins with probability ≥ 1 − δ (Bernstein–Serfling, anytime)",
     geometric: false,
-    make: |d, _| Ok(Box::new(Confident(unit_interval("delta", d, false)?))),
+    make: |d, _| Ok(Box::new(Confident(d))),
 };
 
 const KAPPA: f64 = 7.0 / 3.0 + 2.121_320_343_559_643; // 7/3 + 3/√2

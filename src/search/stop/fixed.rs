@@ -2,15 +2,21 @@
 //! naive baseline every adaptive rule must beat. While the query's feature
 //! count N is unknown (tiles left to extract) the fraction is of its estimate.
 
-use super::{RuleInfo, StopRule, unit_interval};
+use super::{Grid, Parameter, Range, RuleInfo, StopRule};
 use crate::search::vote::Voter;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "fixed",
-    parameter: Some("fraction"),
+    parameter: Some(Parameter {
+        name: "fraction",
+        meaning: "f, the share of the query's features to use",
+        range: Range::Fraction,
+        example: 0.5,
+    }),
+    grid: Grid::Values(&[0.3, 0.5, 0.7]),
     about: "stop after a fixed fraction f of the features",
     geometric: false,
-    make: |f, _| Ok(Box::new(Fixed(unit_interval("fraction", f, true)?))),
+    make: |f, _| Ok(Box::new(Fixed(f))),
 };
 
 struct Fixed(f64);

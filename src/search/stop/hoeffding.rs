@@ -2,15 +2,21 @@
 //! possible vote; stop when the gap between the two best empirical means
 //! reaches √(2·ln(2/δ)/t), Hoeffding's bound on two means of t samples each.
 
-use super::{RuleInfo, StopRule, unit_interval};
+use super::{Grid, Parameter, Range, RuleInfo, StopRule};
 use crate::search::vote::Voter;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "hoeffding",
-    parameter: Some("delta"),
+    parameter: Some(Parameter {
+        name: "delta",
+        meaning: "δ, the chance of stopping on a leader that would lose",
+        range: Range::Open01,
+        example: 0.05,
+    }),
+    grid: Grid::Values(&[0.5, 0.25, 0.1, 0.05, 0.01]),
     about: "stop when the top-2 gap of mean votes ≥ √(2·ln(2/δ)/t)",
     geometric: false,
-    make: |d, _| Ok(Box::new(Hoeffding(unit_interval("delta", d, false)?))),
+    make: |d, _| Ok(Box::new(Hoeffding(d))),
 };
 
 struct Hoeffding(f64);

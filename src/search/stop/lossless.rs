@@ -18,12 +18,13 @@
 //! the gap is still positive are the images with votes scanned with their
 //! own caps, and at most once every [`SCAN_EVERY`] features.
 
-use super::{RuleContext, RuleInfo, StopRule};
+use super::{Grid, RuleContext, RuleInfo, StopRule};
 use crate::search::vote::{Needs, Voter};
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "lossless",
     parameter: None,
+    grid: Grid::Single,
     about: "stop when the remaining features cannot change the top-n answer",
     geometric: false,
     make: |_, ctx: &RuleContext| {

@@ -64,19 +64,128 @@ impl Default for RuleContext {
 /// Builds a rule instance from its parameter, or says why the value is refused.
 pub type MakeRule = fn(f64, &RuleContext) -> Result<Box<dyn StopRule>, String>;
 
-/// A rule's entry in the registry.
+/// The values a parameter accepts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Range {
+    /// A finite number ≥ 0.
+    NonNegative,
+    /// A whole number ≥ 0.
+    Count,
+    /// A whole number in `min..=max`.
+    Whole { min: u32, max: u32 },
+    /// A number in (0, 1).
+    Open01,
+    /// A number in (0, 1].
+    Fraction,
+}
+
+impl Range {
+    /// `v` if it lies in the range, else why not.
+    pub fn check(self, name: &str, v: f64) -> Result<f64, String> {
+        let ok = v.is_finite()
+            && match self {
+                Self::NonNegative => v >= 0.0,
+                Self::Count => v >= 0.0 && v.fract() == 0.0,
+                Self::Whole { min, max } => v >= min as f64 && v <= max as f64 && v.fract() == 0.0,
+                Self::Open01 => v > 0.0 && v < 1.0,
+                Self::Fraction => v > 0.0 && v <= 1.0,
+            };
+        if ok {
+            Ok(v)
+        } else {
+            Err(format!("{name} must be {}, got {v}", self.describe()))
+        }
+    }
+
+    /// The range in words, for messages and help.
+    pub fn describe(self) -> String {
+        match self {
+            Self::NonNegative => "a finite number ≥ 0".into(),
+            Self::Count => "a whole number ≥ 0".into(),
+            Self::Whole { min, max } => format!("a whole number in {min}..={max}"),
+            Self::Open01 => "a number in (0, 1)".into(),
+            Self::Fraction => "a number in (0, 1]".into(),
+        }
+    }
+
+    /// Smallest and largest value (for API documents), and whether the ends
+    /// are excluded.
+    pub fn bounds(self) -> (f64, Option<f64>, bool) {
+        match self {
+            Self::NonNegative | Self::Count => (0.0, None, false),
+            Self::Whole { min, max } => (min as f64, Some(max as f64), false),
+            Self::Open01 => (0.0, Some(1.0), true),
+            Self::Fraction => (0.0, Some(1.0), false),
+        }
+    }
+}
+
+/// A rule's one parameter.
+#[derive(Debug, Clone, Copy)]
+pub struct Parameter {
+    /// Its name in the CLI (`--NAME`), the API (`NAME=`) and the docs.
+    pub name: &'static str,
+    /// What it means.
+    pub meaning: &'static str,
+    pub range: Range,
+    /// A typical value, for help texts and examples.
+    pub example: f64,
+}
+
+/// How the evaluation sweeps a rule's parameter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Grid {
+    /// No parameter: one setting.
+    Single,
+    /// These values.
+    Values(&'static [f64]),
+    /// Values found by bisection in `[lo, hi]` so the mean fraction of
+    /// features used hits the evaluation's targets (`whole`: whole numbers).
+    Calibrated { lo: f64, hi: f64, whole: bool },
+}
+
+/// A rule's entry in the registry: everything each surface (CLI, config,
+/// HTTP, API document, protobuf, evaluation, calibration, docs) knows of it.
 pub struct RuleInfo {
     /// Name used in the CLI, the API and the config.
     pub name: &'static str,
-    /// What its single parameter is called (`threshold`, `delta`, ...).
-    pub parameter: Option<&'static str>,
+    /// Its parameter, if it takes one.
+    pub parameter: Option<Parameter>,
     /// One line for help texts.
     pub about: &'static str,
+    /// How the evaluation sweeps it.
+    pub grid: Grid,
     /// Whether the rule verifies candidates geometrically (it needs a
     /// [`LeaderCheck`], and its answers are re-ranked by verification).
     pub geometric: bool,
-    /// Check a parameter value and build an instance.
+    /// Build an instance from a parameter value within its range.
     pub make: MakeRule,
+}
+
+/// The name every rule's parameter also answers to (`threshold=` in the API
+/// and the config, `--threshold` in the CLI).
+pub const GENERIC_PARAMETER: &str = "threshold";
+
+/// The rule table of the docs, generated from the registry (`bowloc rules`).
+pub fn rules_markdown() -> String {
+    let mut out = String::from(
+        "| rule | parameter | accepted values | example | stops when |\n| --- | --- | --- | --- | --- |\n",
+    );
+    for r in RULES {
+        let (p, range, example) = match &r.parameter {
+            Some(p) => (
+                format!("`{}`: {}", p.name, p.meaning),
+                p.range.describe(),
+                format!("{}", p.example),
+            ),
+            None => ("–".into(), "–".into(), "–".into()),
+        };
+        out += &format!(
+            "| `{}` | {p} | {range} | {example} | {} |\n",
+            r.name, r.about
+        );
+    }
+    out
 }
 
 /// Every rule bowloc knows.
@@ -120,10 +229,13 @@ impl RuleSpec {
                 rule_names().join(", ")
             )
         })?;
-        let parameter = match (info.parameter, parameter) {
-            (None, _) => 0.0,
-            (Some(p), None) => return Err(format!("rule `{name}` needs a {p}")),
-            (Some(_), Some(v)) => v,
+        let parameter = match (&info.parameter, parameter) {
+            (None, None) => 0.0,
+            (None, Some(_)) => return Err(format!("rule `{name}` takes no parameter")),
+            (Some(p), None) => {
+                return Err(format!("rule `{name}` needs a {} ({})", p.name, p.meaning));
+            }
+            (Some(p), Some(v)) => p.range.check(p.name, v)?,
         };
         (info.make)(parameter, &RuleContext::default())?;
         Ok(Self {
@@ -143,7 +255,7 @@ impl RuleSpec {
 
     /// Name of the parameter, if the rule takes one.
     pub fn parameter_name(&self) -> Option<&'static str> {
-        self.info().parameter
+        self.info().parameter.as_ref().map(|p| p.name)
     }
 }
 
@@ -156,23 +268,78 @@ impl std::fmt::Display for RuleSpec {
     }
 }
 
-/// A finite, non-negative parameter.
-fn non_negative(what: &str, v: f64) -> Result<f64, String> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(v)
-    } else {
-        Err(format!("{what} must be a finite number ≥ 0, got {v}"))
+/// A rule's parameter given by name: the rule's own name for it or
+/// [`GENERIC_PARAMETER`]. Refuses a parameter the rule does not take, a name
+/// that belongs to another rule, and more than one value. Used by every
+/// front end (CLI flags, query strings), so they accept the same things.
+pub fn parse_rule(name: &str, given: &[(&str, f64)]) -> Result<RuleSpec, RuleError> {
+    let info = rule_info(name).ok_or_else(|| RuleError {
+        parameter: None,
+        message: format!(
+            "unknown rule `{name}`; known rules: {}",
+            rule_names().join(", ")
+        ),
+    })?;
+    if given.len() > 1 {
+        let names: Vec<&str> = given.iter().map(|g| g.0).collect();
+        return Err(RuleError {
+            parameter: Some(given[1].0.to_owned()),
+            message: format!("give one parameter, not {}", names.join(" and ")),
+        });
+    }
+    let value = match (given.first(), &info.parameter) {
+        (None, _) => None,
+        (Some(&(what, _)), None) => {
+            return Err(RuleError {
+                parameter: Some(what.to_owned()),
+                message: format!("rule `{name}` takes no parameter"),
+            });
+        }
+        (Some(&(what, v)), Some(p)) => {
+            if what != p.name && what != GENERIC_PARAMETER {
+                return Err(RuleError {
+                    parameter: Some(what.to_owned()),
+                    message: format!("rule `{name}` takes a {}, not a {what}", p.name),
+                });
+            }
+            Some(v)
+        }
+    };
+    RuleSpec::new(name, value).map_err(|message| RuleError {
+        parameter: Some(
+            given
+                .first()
+                .map_or_else(|| "rule".to_owned(), |g| g.0.to_owned()),
+        ),
+        message,
+    })
+}
+
+/// Why a rule and its parameter were refused, and which parameter it was.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RuleError {
+    /// The parameter at fault (`None`: the rule's name).
+    pub parameter: Option<String>,
+    pub message: String,
+}
+
+impl std::fmt::Display for RuleError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
     }
 }
 
-/// A parameter in the open interval (0, 1) (or (0, 1] when `one_ok`).
-fn unit_interval(what: &str, v: f64, one_ok: bool) -> Result<f64, String> {
-    if v > 0.0 && (v < 1.0 || (one_ok && v == 1.0)) {
-        Ok(v)
-    } else {
-        let hi = if one_ok { "1]" } else { "1)" };
-        Err(format!("{what} must lie in (0, {hi}, got {v}"))
+/// Every distinct parameter name of the registry, the generic one first.
+pub fn parameter_names() -> Vec<&'static str> {
+    let mut names = vec![GENERIC_PARAMETER];
+    for r in RULES {
+        if let Some(p) = &r.parameter
+            && !names.contains(&p.name)
+        {
+            names.push(p.name);
+        }
     }
+    names
 }
 
 #[cfg(test)]

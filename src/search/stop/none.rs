@@ -1,11 +1,12 @@
 //! Rule `none`: never stop early (full bag-of-words).
 
-use super::{RuleInfo, StopRule};
+use super::{Grid, RuleInfo, StopRule};
 use crate::search::vote::Voter;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "none",
     parameter: None,
+    grid: Grid::Single,
     about: "full bag-of-words: quantize every feature",
     geometric: false,
     make: |_, _| Ok(Box::new(NoStop)),

@@ -5,15 +5,25 @@
 //! same T asks the same lead of a 100-feature and of a 2000-feature query. A
 //! paper threshold T′ corresponds to T = T′·N.
 
-use super::{RuleInfo, StopRule, non_negative};
+use super::{Grid, Parameter, Range, RuleInfo, StopRule};
 use crate::search::vote::Voter;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "peak-mean",
-    parameter: Some("threshold"),
+    parameter: Some(Parameter {
+        name: "threshold",
+        meaning: "T, the lead of the peak over the mean vote (votes summed, not divided by N)",
+        range: Range::NonNegative,
+        example: 8.0,
+    }),
+    grid: Grid::Calibrated {
+        lo: 1e-3,
+        hi: 1e4,
+        whole: false,
+    },
     about: "rule 1: stop when max(h) − mean(h) > T",
     geometric: false,
-    make: |t, _| Ok(Box::new(PeakMean(non_negative("threshold", t)?))),
+    make: |t, _| Ok(Box::new(PeakMean(t))),
 };
 
 struct PeakMean(f64);

@@ -1,14 +1,24 @@
 //! Rule 2 (`relative`): stop when (max(h) − mean(h)) / mean(h) > T.
 
-use super::{RuleInfo, StopRule, non_negative};
+use super::{Grid, Parameter, Range, RuleInfo, StopRule};
 use crate::search::vote::Voter;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "relative",
-    parameter: Some("threshold"),
+    parameter: Some(Parameter {
+        name: "threshold",
+        meaning: "T, the lead of the peak over the mean vote relative to the mean",
+        range: Range::NonNegative,
+        example: 2.5,
+    }),
+    grid: Grid::Calibrated {
+        lo: 1e-6,
+        hi: 1e6,
+        whole: false,
+    },
     about: "rule 2: stop when (max(h) − mean(h)) / mean(h) > T",
     geometric: false,
-    make: |t, _| Ok(Box::new(Relative(non_negative("threshold", t)?))),
+    make: |t, _| Ok(Box::new(Relative(t))),
 };
 
 struct Relative(f64);

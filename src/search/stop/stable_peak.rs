@@ -1,21 +1,25 @@
 //! Rule 3 (`stable-peak`): stop when the peak of h has not changed for T
 //! consecutive features.
 
-use super::{RuleInfo, StopRule, non_negative};
+use super::{Grid, Parameter, Range, RuleInfo, StopRule};
 use crate::search::vote::Voter;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "stable-peak",
-    parameter: Some("threshold"),
+    parameter: Some(Parameter {
+        name: "threshold",
+        meaning: "T, the features the peak must hold the lead",
+        range: Range::Count,
+        example: 150.0,
+    }),
+    grid: Grid::Calibrated {
+        lo: 1.0,
+        hi: 1e5,
+        whole: true,
+    },
     about: "rule 3: stop when the peak has not changed for T features",
     geometric: false,
     make: |t, _| {
-        let t = non_negative("threshold", t)?;
-        if t.fract() != 0.0 {
-            return Err(format!(
-                "threshold of stable-peak counts features: a whole number, got {t}"
-            ));
-        }
         Ok(Box::new(StablePeak {
             needed: t as usize,
             leader: None,

@@ -202,7 +202,77 @@ fn bad_specs_are_refused_with_reasons() {
     assert!(RuleSpec::new("hoeffding", Some(1.0)).is_err());
     assert!(RuleSpec::new("fixed", Some(1.5)).is_err());
     assert!(RuleSpec::new("stable-peak", Some(2.5)).is_err());
-    assert!(RuleSpec::new("none", Some(3.0)).is_ok());
+    assert!(
+        RuleSpec::new("none", Some(3.0))
+            .unwrap_err()
+            .contains("takes no parameter")
+    );
+}
+
+#[test]
+fn parameters_are_parsed_the_same_way_everywhere() {
+    let p = |name: &str, given: &[(&str, f64)]| parse_rule(name, given);
+    assert_eq!(p("relative", &[("threshold", 2.5)]).unwrap().parameter, 2.5);
+    assert_eq!(p("hoeffding", &[("delta", 0.1)]).unwrap().parameter, 0.1);
+    // the generic name is accepted for any rule's parameter
+    assert_eq!(p("fixed", &[("threshold", 0.5)]).unwrap().parameter, 0.5);
+    assert_eq!(p("verified", &[("inliers", 12.0)]).unwrap().parameter, 12.0);
+    let err = |name: &str, given: &[(&str, f64)]| p(name, given).unwrap_err();
+    assert_eq!(
+        err("none", &[("threshold", 2.5)]).parameter.as_deref(),
+        Some("threshold")
+    );
+    assert!(
+        err("peak-mean", &[("delta", 0.1)])
+            .message
+            .contains("takes a threshold")
+    );
+    assert!(err("relative", &[]).message.contains("needs a threshold"));
+    assert!(
+        err("relative", &[("threshold", 1.0), ("delta", 0.1)])
+            .message
+            .contains("give one")
+    );
+    assert_eq!(err("nope", &[]).parameter, None);
+    assert!(
+        err("verified", &[("inliers", 3.0)])
+            .message
+            .contains("4..=1000")
+    );
+}
+
+#[test]
+fn every_rule_has_all_its_parts() {
+    for r in RULES {
+        assert!(!r.about.is_empty(), "{}", r.name);
+        match (&r.parameter, r.grid) {
+            (None, Grid::Single) => {
+                RuleSpec::new(r.name, None).unwrap();
+            }
+            (None, _) => panic!("{}: a grid for a rule without a parameter", r.name),
+            (Some(_), Grid::Single) => panic!("{}: a parameter without a grid", r.name),
+            (Some(p), grid) => {
+                assert!(!p.meaning.is_empty(), "{}", r.name);
+                assert!(parameter_names().contains(&p.name));
+                RuleSpec::new(r.name, Some(p.example)).unwrap();
+                match grid {
+                    Grid::Values(vs) => {
+                        assert!(!vs.is_empty());
+                        for &v in vs {
+                            RuleSpec::new(r.name, Some(v)).unwrap();
+                        }
+                    }
+                    Grid::Calibrated { lo, hi, .. } => {
+                        assert!(lo < hi);
+                        RuleSpec::new(r.name, Some(lo)).unwrap();
+                        RuleSpec::new(r.name, Some(hi)).unwrap();
+                    }
+                    Grid::Single => unreachable!(),
+                }
+            }
+        }
+        assert!(rules_markdown().contains(&format!("| `{}` |", r.name)));
+    }
 }
 
 #[test]

@@ -6,24 +6,26 @@
 //! the end of its features, like the full search: easy queries stop early,
 //! hard ones lose nothing.
 //!
-//! A check costs far more than a vote, so the leader is checked only when it
-//! has held the lead for [`STABLE`] features, at most once every [`EVERY`]
-//! features, and a leader that failed is checked again only after
-//! [`RECHECK`] more features.
+//! A check costs far more than a vote, so the search offers one only at the
+//! end of a batch (a tile of streaming extraction: stopping inside a tile
+//! saves no extraction), and the leader is checked only when it has held the
+//! lead for [`STABLE`] features, at most once every [`EVERY`] features; a
+//! leader that failed is checked again only after [`RECHECK`] more features.
 
-use super::{LeaderCheck, RuleInfo, StopRule, Voter};
+use super::{Grid, LeaderCheck, Parameter, Range, RuleInfo, StopRule, Voter};
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "verified",
-    parameter: Some("inliers"),
+    parameter: Some(Parameter {
+        name: "inliers",
+        meaning: "m, the inliers that verify the leader (a homography needs 4 points)",
+        range: Range::Whole { min: 4, max: 1000 },
+        example: 12.0,
+    }),
+    grid: Grid::Values(&[8.0, 12.0, 16.0, 24.0]),
     about: "stop when the leader is geometrically verified with at least m inliers",
     geometric: true,
     make: |m, _| {
-        if !(m.is_finite() && m >= 4.0 && m <= 1000.0 && m.fract() == 0.0) {
-            return Err(format!(
-                "inliers of rule verified: a whole number in 4..=1000 (a homography needs 4 points), got {m}"
-            ));
-        }
         Ok(Box::new(Verified {
             min_inliers: m as usize,
             leader: None,

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Regenerate the evaluation behind docs/results.md on this machine, in one
+# command: the README's eval command on both shared datasets (gardens-point
+# at K = 5000, rtabmap-loop at K = 1000; 3 vocabulary seeds and 10 random
+# feature orders each, plus the settings docs/results.md compares across
+# maps), from empty caches unless --keep-cache. The full outputs land in
+# data/eval/<dataset>-k<K>/; the tables, CSVs and figures are copied into
+# docs/results/<dataset>/ (results.json, with every query's answers, stays in
+# data/eval: it is large). docs/results.md pastes each results.md unchanged.
+#
+#   scripts/eval-all.sh [--keep-cache]
+#
+# Every figure depends on the CPU (SIFT's output follows its instruction
+# set): each results.md names the CPU, OpenCV's SIMD level and the
+# descriptor checksums it was made with.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+keep_cache=no
+case "${1:-}" in
+  --keep-cache) keep_cache=yes ;;
+  "") ;;
+  *) echo "usage: scripts/eval-all.sh [--keep-cache]" >&2; exit 2 ;;
+esac
+cargo build --release
+B=./target/release/bowloc
+D=../shared/datasets
+# settings run besides the grids, to see whether one carries over between maps
+sets=(--set relative=2@100 --set relative=2.3@100 --set relative=2.5@100
+      --set peak-mean=0.011@20 --set peak-mean=0.05@20)
+for run in gardens-point:5000 rtabmap-loop:1000; do
+  name=${run%%:*}
+  words=${run##*:}
+  out=data/eval/$name-k$words
+  if [ "$keep_cache" = no ]; then
+    rm -rf "data/eval-cache/$name" "$out"
+  fi
+  /usr/bin/time -f "$name: wall %e s" \
+    nice $B eval --dataset "$D/$name" --words "$words" --runs 10 --vocab-seeds 3 \
+      "${sets[@]}" --out "$out"
+  mkdir -p "docs/results/$name"
+  rm -f "docs/results/$name"/*
+  cp "$out"/results.md "$out"/*.csv "$out"/*.png "$out"/*.svg "docs/results/$name/"
+done
+echo "docs/results/{gardens-point,rtabmap-loop} regenerated; paste their results.md into docs/results.md"
