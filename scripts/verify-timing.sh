@@ -18,9 +18,9 @@ trap 'rm -rf "$TMP"' EXIT
 mapfile -t QUERIES < <(sed "s|^|$D/|" "$D/queries.txt")
 for ((i = 0; i < ${#QUERIES[@]}; i += 20)); do
     batch=("${QUERIES[@]:i:20}")
-    "$B" query --vocab "$VOCAB" --map "$MAP" --seed 1 "$@" "${batch[@]}" 2>/dev/null |
+    "$B" query --vocab "$VOCAB" --map "$MAP" --rule none --seed 1 "$@" "${batch[@]}" 2>/dev/null |
         jq -r '.[].timings_ms.total' >>"$TMP/without"
-    "$B" query --vocab "$VOCAB" --map "$MAP" --seed 1 --verify "$@" "${batch[@]}" 2>/dev/null |
+    "$B" query --vocab "$VOCAB" --map "$MAP" --rule none --seed 1 --verify "$@" "${batch[@]}" 2>/dev/null |
         jq -r '.[].timings_ms | "\(.total) \(.verify)"' >>"$TMP/with"
 done
 median() { sort -g | awk '{ v[NR] = $1 } END { print (NR % 2) ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2 }'; }
