@@ -20,7 +20,7 @@ RUN cargo build --release --locked --bin bowloc \
 
 FROM debian:bookworm-slim AS runtime
 RUN apt-get update \
- && apt-get install -y --no-install-recommends libopencv-core406 libopencv-imgproc406 libopencv-imgcodecs406 libopencv-features2d406 libopencv-flann406 \
+ && apt-get install -y --no-install-recommends libopencv-core406 libopencv-imgproc406 libopencv-imgcodecs406 libopencv-features2d406 libopencv-flann406 libopencv-calib3d406 \
  && rm -rf /var/lib/apt/lists/* \
  && useradd --system --uid 10001 --home-dir /srv/bowloc --create-home bowloc \
  && mkdir -p /data && chown bowloc /data
