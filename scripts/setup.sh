@@ -5,7 +5,8 @@ set -euo pipefail
 # fonts-dejavu-core: the TrueType font `bowloc eval` draws its plots' text with.
 # python3-venv: scripts/schemathesis.sh installs schemathesis into a virtualenv.
 # wrk: the load scripts (scripts/load.sh, scripts/overload.sh).
-packages=(libopencv-dev clang libclang-dev curl jq make ca-certificates fonts-dejavu-core
+# pkg-config: how the `opencv` crate finds OpenCV's headers and libraries.
+packages=(libopencv-dev pkg-config clang libclang-dev curl jq make ca-certificates fonts-dejavu-core
   python3 python3-venv wrk)
 missing=()
 for p in "${packages[@]}"; do

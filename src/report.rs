@@ -14,6 +14,16 @@ use utoipa::ToSchema;
 use utoipa::openapi::RefOr;
 use utoipa::openapi::schema::{ObjectBuilder, Schema, Type};
 
+/// Largest seed drawn for a query that gives none: 2^53 − 1, the largest
+/// integer a JSON number (a double) holds exactly, so that a client can send
+/// a reported seed back unchanged.
+pub const MAX_DRAWN_SEED: u64 = (1 << 53) - 1;
+
+/// A seed for a query that gives none, uniform in 0..=[`MAX_DRAWN_SEED`].
+pub fn draw_seed() -> u64 {
+    rand::random_range(0..=MAX_DRAWN_SEED)
+}
+
 /// The answer to one query.
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Localization {
@@ -26,6 +36,8 @@ pub struct Localization {
     pub rule: RuleReport,
     pub stop: StopInfo,
     /// Seed of the feature permutation (repeat it to reproduce the answer).
+    /// A seed drawn for a query that gave none is below 2^53, so a JSON
+    /// number holds it exactly; a seed given is reported as given.
     pub seed: u64,
     pub image: ImageSize,
     /// Milliseconds per stage.
@@ -41,6 +53,7 @@ pub struct Localization {
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Candidate {
     /// 1 for the best.
+    #[schema(minimum = 1)]
     pub rank: usize,
     /// Map image id (its line in the map's image list, from 0).
     pub id: u32,
@@ -347,6 +360,17 @@ mod tests {
     use super::*;
     use crate::search::StopKind;
     use utoipa::PartialSchema;
+
+    #[test]
+    fn drawn_seeds_are_exact_in_json_and_span_their_range() {
+        let seeds: Vec<u64> = (0..4000).map(|_| draw_seed()).collect();
+        for &s in &seeds {
+            assert!(s <= MAX_DRAWN_SEED);
+            let through_json: f64 = serde_json::from_str(&s.to_string()).unwrap();
+            assert_eq!(through_json as u64, s);
+        }
+        assert!(seeds.iter().any(|&s| s > MAX_DRAWN_SEED / 2));
+    }
 
     fn object(schema: RefOr<Schema>) -> utoipa::openapi::schema::Object {
         match schema {

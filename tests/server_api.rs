@@ -199,6 +199,8 @@ async fn before_the_map_is_loaded_only_liveness_answers() {
         assert!(headers.contains_key(header::RETRY_AFTER));
         let v: serde_json::Value = serde_json::from_slice(&body).unwrap();
         assert_eq!(v["error"]["code"], "not_ready");
+        // the loading step (nothing loads here, so it never moves on)
+        assert_eq!(v["error"]["step"], "starting");
     }
     state.set_localizer(Localizer::open(&files().0, &files().1, false).unwrap());
     let (status, _, _) = send(&state, get("/readyz")).await;

@@ -127,7 +127,7 @@ impl SearchArgs {
         Ok(SearchOptions {
             rule,
             top_n: self.top_n,
-            seed: self.seed.unwrap_or_else(rand::random),
+            seed: self.seed.unwrap_or_else(bowloc::report::draw_seed),
             block: self.block,
             min_features: self.min_features,
             min_score: self.min_score,

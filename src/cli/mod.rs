@@ -49,7 +49,7 @@ enum Command {
     /// Print the stopping rules and their parameters (the table of
     /// docs/service.md), from the registry every front end reads.
     Rules,
-    /// Exit 0 when a running service's /healthz answers 200.
+    /// Exit 0 when a running service answers 200 on /readyz (or --path).
     Healthcheck(healthcheck::HealthcheckArgs),
 }
 

@@ -1,29 +1,19 @@
-//! The sweep: which rules run with which parameters (one table,
-//! [`RULE_GRIDS`]: a new rule is one line there), how calibrated grids are
+//! The sweep: which rules run with which parameters (each rule's grid is
+//! declared in the rule registry, [`crate::search::stop::RULES`]), how calibrated grids are
 //! found for a dataset, and running every setting over every Monte Carlo run
 //! and query on pre-quantized words.
 
 use super::tiles::Query;
 use crate::calibrate::median_features;
 use crate::index::MapIndex;
+use crate::search::stop::RULES;
 use crate::search::{Ranked, RuleSpec, SearchOptions, StopKind, search_words};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::{Serialize, Serializer};
+use std::sync::LazyLock;
 
-/// How a rule's parameter values are chosen.
-#[derive(Debug, Clone, Copy)]
-pub enum Grid {
-    /// The rule takes no parameter: one setting.
-    Single,
-    /// Exactly these values.
-    Values(&'static [f64]),
-    /// Values found for each dataset and warm-up so that the mean fraction of
-    /// features used hits each calibration target; searched by bisection on a
-    /// log scale within `[lo, hi]` (whole numbers when `whole`). Works for any
-    /// rule whose stop point moves one way as its parameter grows.
-    Calibrated { lo: f64, hi: f64, whole: bool },
-}
+pub use crate::search::stop::Grid;
 
 /// A rule and how its parameter is swept.
 #[derive(Debug, Clone, Copy)]
@@ -35,59 +25,19 @@ pub struct RuleGrid {
 /// The full search every other setting is compared with.
 pub const BASELINE: &str = "none";
 
-/// Every rule the evaluation knows, with its grid. Calibrated grids are also
-/// run at every warm-up (`min_features`) asked for; the others only at the
-/// first.
-pub const RULE_GRIDS: &[RuleGrid] = &[
-    RuleGrid {
-        rule: BASELINE,
-        grid: Grid::Single,
-    },
-    RuleGrid {
-        rule: "peak-mean",
-        grid: Grid::Calibrated {
-            lo: 1e-9,
-            hi: 1e3,
-            whole: false,
-        },
-    },
-    RuleGrid {
-        rule: "relative",
-        grid: Grid::Calibrated {
-            lo: 1e-6,
-            hi: 1e6,
-            whole: false,
-        },
-    },
-    RuleGrid {
-        rule: "stable-peak",
-        grid: Grid::Calibrated {
-            lo: 1.0,
-            hi: 1e5,
-            whole: true,
-        },
-    },
-    RuleGrid {
-        rule: "hoeffding",
-        grid: Grid::Values(&[0.5, 0.25, 0.1, 0.05, 0.01]),
-    },
-    RuleGrid {
-        rule: "fixed",
-        grid: Grid::Values(&[0.3, 0.5, 0.7]),
-    },
-    RuleGrid {
-        rule: "lossless",
-        grid: Grid::Single,
-    },
-    RuleGrid {
-        rule: "confident",
-        grid: Grid::Values(&[0.1, 0.05, 0.01]),
-    },
-    RuleGrid {
-        rule: "verified",
-        grid: Grid::Values(&[8.0, 12.0, 16.0, 24.0]),
-    },
-];
+/// Every rule of the registry with its grid, in registry order (the full
+/// search first): a rule cannot be left out of the sweep. Calibrated grids
+/// are run at every warm-up (`min_features`) asked for; the others only at
+/// the first.
+pub static RULE_GRIDS: LazyLock<Vec<RuleGrid>> = LazyLock::new(|| {
+    RULES
+        .iter()
+        .map(|r| RuleGrid {
+            rule: r.name,
+            grid: r.grid,
+        })
+        .collect()
+});
 
 /// Range searched when calibrating a rule's parameter: the calibrated grid's
 /// range, or δ ∈ [10⁻⁹, 0.5] for the confidence rules.
@@ -584,7 +534,7 @@ mod tests {
 
     #[test]
     fn every_grid_names_a_known_rule_with_valid_values() {
-        for g in RULE_GRIDS {
+        for g in RULE_GRIDS.iter() {
             let info = rule_info(g.rule).unwrap_or_else(|| panic!("unknown rule {}", g.rule));
             match g.grid {
                 Grid::Single => assert!(info.parameter.is_none(), "{}", g.rule),

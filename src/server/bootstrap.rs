@@ -1,31 +1,85 @@
-//! Start-up of the map: build the configured vocabulary and map from the
+//! Start-up of the map: build the default vocabulary and map from the
 //! bootstrap dataset when they are missing (so `make run` works from a fresh
-//! clone), then open them memory-mapped with the configured limits.
+//! clone), reporting each step for `/readyz`, then open them memory-mapped
+//! with the configured limits. Bootstrap only ever writes the default files
+//! it owns (the built-in `files.vocabulary` and `files.map`); any other path
+//! must name an existing file.
 
-use super::config::Config;
+use super::config::{Config, FilesConfig};
 use crate::dataset::image_list;
 use crate::features::DecodeLimits;
-use crate::pipeline::{Localizer, build_map, build_vocabulary};
+use crate::pipeline::{Localizer, build_map, extract_all, stack};
 use crate::quantize::QuantizerKind;
-use crate::vocabulary::Vocabulary;
-use crate::vocabulary::kmeans::KmeansConfig;
+use crate::vocabulary::kmeans::{KmeansConfig, kmeans};
+use crate::vocabulary::{Vocabulary, VocabularyMeta};
 use anyhow::{Context, bail};
+use indicatif::ProgressBar;
 use std::path::Path;
 use std::time::Instant;
 
-/// Build what is missing, then open the vocabulary and map.
-pub fn load(config: &Config) -> anyhow::Result<Localizer> {
+/// What loading the map is doing now: a step and, for the steps that count
+/// (k-means seeding and iterations), how far along it is. Shared between
+/// the loader and `/readyz`.
+#[derive(Clone)]
+pub struct Progress {
+    bar: ProgressBar,
+}
+
+impl Default for Progress {
+    fn default() -> Self {
+        let bar = ProgressBar::hidden();
+        bar.set_message("starting");
+        Self { bar }
+    }
+}
+
+impl Progress {
+    /// Begin a step that does not count.
+    fn begin(&self, step: impl Into<String>) {
+        self.bar.set_length(0);
+        self.bar.set_position(0);
+        self.bar.set_message(step.into());
+    }
+
+    /// The step now, e.g. `loading` or `k-means: Lloyd iterations 12/40`.
+    pub fn step(&self) -> String {
+        let message = self.bar.message();
+        match self.bar.length() {
+            Some(n) if n > 0 => format!("{message} {}/{n}", self.bar.position()),
+            _ => message,
+        }
+    }
+}
+
+/// Build what is missing (the default files only), then open the vocabulary
+/// and map, reporting each step to `progress`.
+pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
     let files = &config.files;
+    for (path, what) in [(&files.vocabulary, "vocabulary"), (&files.map, "map")] {
+        if path.is_dir() {
+            bail!("{}: is a directory, not a {what} file", path.display());
+        }
+    }
     let (vocab_missing, map_missing) = (!files.vocabulary.exists(), !files.map.exists());
     if vocab_missing || map_missing {
-        if !config.bootstrap.enabled {
+        let defaults = FilesConfig::default();
+        if files.vocabulary != defaults.vocabulary || files.map != defaults.map {
             bail!(
-                "{} is missing and bootstrap is disabled (bootstrap.enabled)",
-                missing_names(config)
+                "{} (bootstrap builds only the default files {} and {})",
+                missing(config),
+                defaults.vocabulary.display(),
+                defaults.map.display()
             );
         }
-        build_missing(config, vocab_missing)?;
+        if !config.bootstrap.enabled {
+            bail!(
+                "{} and bootstrap is disabled (bootstrap.enabled)",
+                missing(config)
+            );
+        }
+        build_missing(config, vocab_missing, progress)?;
     }
+    progress.begin("loading the vocabulary and map");
     tracing::info!(
         vocabulary = %files.vocabulary.display(),
         map = %files.map.display(),
@@ -40,6 +94,7 @@ pub fn load(config: &Config) -> anyhow::Result<Localizer> {
     localizer.set_verify(config.verify.clone());
     if let QuantizerKind::Tree { .. } = localizer.quantizer {
         // build the tree now, not in the first request
+        progress.begin("building the quantization tree");
         let groups = localizer.vocab.tree_quantizer().groups();
         tracing::info!(groups, "quantization tree built");
     }
@@ -52,25 +107,27 @@ pub fn load(config: &Config) -> anyhow::Result<Localizer> {
     Ok(localizer)
 }
 
-fn missing_names(config: &Config) -> String {
-    [&config.files.vocabulary, &config.files.map]
+/// `A is missing` or `A and B are missing`.
+fn missing(config: &Config) -> String {
+    let names: Vec<String> = [&config.files.vocabulary, &config.files.map]
         .into_iter()
         .filter(|p| !p.exists())
         .map(|p| p.display().to_string())
-        .collect::<Vec<_>>()
-        .join(" and ")
+        .collect();
+    let verb = if names.len() > 1 { "are" } else { "is" };
+    format!("{} {verb} missing", names.join(" and "))
 }
 
 /// Build the map (and the vocabulary first, when `vocab_missing`) from the
 /// bootstrap dataset's map images.
-fn build_missing(config: &Config, vocab_missing: bool) -> anyhow::Result<()> {
+fn build_missing(config: &Config, vocab_missing: bool, progress: &Progress) -> anyhow::Result<()> {
     let b = &config.bootstrap;
     let list = b.dataset.join("map.txt");
     if !list.is_file() {
         bail!(
-            "{} is missing, and the bootstrap dataset has no {} (set files.vocabulary and \
+            "{}, and the bootstrap dataset has no {} (set files.vocabulary and \
              files.map to existing files, or bootstrap.dataset to a dataset folder)",
-            missing_names(config),
+            missing(config),
             list.display()
         );
     }
@@ -82,19 +139,43 @@ fn build_missing(config: &Config, vocab_missing: bool) -> anyhow::Result<()> {
             images = images.len(),
             words = b.words,
             seed = b.seed,
-            "bootstrap: building the vocabulary (extracting features, then k-means; this can take a minute or more)"
+            "bootstrap: building the vocabulary (extracting features, then k-means; this can take minutes)"
         );
-        let kmeans = KmeansConfig {
+        progress.begin(format!(
+            "vocabulary: extracting the features of {} images",
+            images.len()
+        ));
+        let extract = Default::default();
+        let all = extract_all(
+            &images,
+            &extract,
+            DecodeLimits::default(),
+            false,
+            "extracting",
+        )?;
+        let parts: Vec<_> = all.iter().flatten().collect();
+        let data = stack(&parts);
+        let kmeans_config = KmeansConfig {
             k: b.words,
             seed: b.seed,
             ..Default::default()
         };
-        let vocab = build_vocabulary(&images, &Default::default(), &kmeans, false)?;
+        progress.begin("k-means");
+        let (centroids, report) = kmeans(data.view(), &kmeans_config, &progress.bar)?;
+        let meta = VocabularyMeta {
+            extract,
+            seed: b.seed,
+            trained_on: report.trained_on,
+            iterations: report.iterations,
+            ..Default::default()
+        };
+        let vocab = Vocabulary::from_centroids(centroids, meta);
         create_parent(&config.files.vocabulary)?;
         vocab.save(&config.files.vocabulary)?;
         tracing::info!(
             path = %config.files.vocabulary.display(),
             words = vocab.words(),
+            iterations = report.iterations,
             seconds = started.elapsed().as_secs(),
             "bootstrap: vocabulary written"
         );
@@ -107,6 +188,7 @@ fn build_missing(config: &Config, vocab_missing: bool) -> anyhow::Result<()> {
         images = images.len(),
         "bootstrap: building the map"
     );
+    progress.begin(format!("map: indexing {} images", images.len()));
     let name = b
         .dataset
         .canonicalize()
@@ -137,6 +219,10 @@ fn create_parent(path: &Path) -> anyhow::Result<()> {
 mod tests {
     use super::*;
 
+    fn load_err(c: &Config) -> String {
+        load(c, &Progress::default()).err().unwrap().to_string()
+    }
+
     #[test]
     fn missing_files_without_bootstrap_name_the_files() {
         let dir = tempfile::tempdir().unwrap();
@@ -144,11 +230,46 @@ mod tests {
         c.files.vocabulary = dir.path().join("v.bowvoc");
         c.files.map = dir.path().join("m.bowmap");
         c.bootstrap.enabled = false;
-        let e = load(&c).err().unwrap().to_string();
+        let e = load_err(&c);
         assert!(e.contains("v.bowvoc") && e.contains("m.bowmap"), "{e}");
-        c.bootstrap.enabled = true;
-        c.bootstrap.dataset = dir.path().join("nowhere");
-        let e = load(&c).err().unwrap().to_string();
-        assert!(e.contains("nowhere"), "{e}");
+    }
+
+    #[test]
+    fn bootstrap_never_builds_a_path_it_does_not_own() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut c = Config::default();
+        // a mistyped map path, bootstrap enabled with a real dataset
+        c.files.map = dir.path().join("typo.bowmap");
+        let e = load_err(&c);
+        assert!(e.contains("typo.bowmap") && e.contains("missing"), "{e}");
+        assert!(e.contains("only the default files"), "{e}");
+        assert!(!c.files.map.exists());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    }
+
+    #[test]
+    fn a_directory_is_named_as_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut c = Config::default();
+        c.files.vocabulary = dir.path().to_path_buf();
+        let e = load_err(&c);
+        assert!(e.ends_with("is a directory, not a vocabulary file"), "{e}");
+        c.files.vocabulary = dir.path().join("v.bowvoc");
+        c.files.map = dir.path().to_path_buf();
+        let e = load_err(&c);
+        assert!(e.ends_with("is a directory, not a map file"), "{e}");
+    }
+
+    #[test]
+    fn progress_names_the_step_and_counts() {
+        let p = Progress::default();
+        assert_eq!(p.step(), "starting");
+        p.begin("k-means");
+        p.bar.set_message("Lloyd iterations");
+        p.bar.set_length(40);
+        p.bar.set_position(12);
+        assert_eq!(p.step(), "Lloyd iterations 12/40");
+        p.begin("map: indexing 200 images");
+        assert_eq!(p.step(), "map: indexing 200 images");
     }
 }

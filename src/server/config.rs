@@ -41,6 +41,15 @@ pub struct ServerConfig {
     /// OpenCV threads each worker's SIFT extraction may fan out to.
     pub opencv_threads: usize,
     pub log_format: LogFormat,
+    /// Connections open at once; beyond, new ones wait in the listen backlog.
+    pub max_connections: usize,
+    /// Time a connection may take to send a request's headers, also while
+    /// idle between requests.
+    pub header_timeout_ms: u64,
+    /// Longest pause while a request body arrives.
+    pub body_timeout_ms: u64,
+    /// After SIGTERM, time requests in flight have to finish.
+    pub drain_ms: u64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -95,6 +104,10 @@ pub struct Limits {
     pub queue: usize,
     /// Time a request may take, queueing included.
     pub deadline_ms: u64,
+    /// Most header fields of a request (431 beyond).
+    pub headers: usize,
+    /// Most bytes of a request's header fields, names and values (431 beyond).
+    pub header_bytes: usize,
 }
 
 /// Building a default vocabulary and map from a dataset when the configured
@@ -118,6 +131,10 @@ impl Default for ServerConfig {
             workers: 0,
             opencv_threads: 1,
             log_format: LogFormat::Human,
+            max_connections: 256,
+            header_timeout_ms: 10_000,
+            body_timeout_ms: 10_000,
+            drain_ms: 12_000,
         }
     }
 }
@@ -159,6 +176,8 @@ impl Default for Limits {
             max_top_n: 100,
             queue: 32,
             deadline_ms: 10_000,
+            headers: 100,
+            header_bytes: 64 * 1024,
         }
     }
 }
@@ -184,26 +203,96 @@ pub struct Overrides {
     pub log_format: Option<LogFormat>,
 }
 
-/// A configuration that cannot be used, naming the key at fault.
+/// A configuration that cannot be used, naming the key at fault and, when
+/// known, where its value came from.
 #[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct ConfigError(String);
+#[error("{message}")]
+pub struct ConfigError {
+    /// The key (or keys, `a / b`) at fault, when one is.
+    pub key: Option<String>,
+    pub message: String,
+}
+
+impl ConfigError {
+    fn new(message: String) -> Self {
+        Self { key: None, message }
+    }
+
+    fn at(key: &str, why: impl std::fmt::Display) -> Self {
+        Self {
+            key: Some(key.to_owned()),
+            message: format!("{key}: {why}"),
+        }
+    }
+
+    /// Say where the values of the keys at fault came from (the file, or
+    /// the environment variable by its name), as `figment` recorded it.
+    fn with_sources(mut self, figment: &Figment) -> Self {
+        let Some(keys) = &self.key else { return self };
+        let sources: Vec<String> = keys
+            .split(" / ")
+            .filter_map(|key| {
+                let m = figment.find_metadata(key)?;
+                let path: Vec<&str> = key.split('.').collect();
+                source(m, &path).map(|from| format!("{key} from {from}"))
+            })
+            .collect();
+        if !sources.is_empty() {
+            self.message = format!("{} ({})", self.message, sources.join(", "));
+        }
+        self
+    }
+}
+
+/// Where a value came from: the file, or the environment variables under
+/// `path` by their full names; `None` for a built-in default.
+fn source(m: &figment::Metadata, path: &[&str]) -> Option<String> {
+    if m.name.contains("environment") {
+        let upper: Vec<String> = path.iter().map(|p| p.to_ascii_uppercase()).collect();
+        let name = format!("{ENV_PREFIX}{}", upper.join("__"));
+        // A section named alone (an unknown one) stands for every variable
+        // below it: name those in full.
+        let mut full: Vec<String> = std::env::vars_os()
+            .filter_map(|(k, _)| k.into_string().ok())
+            .filter(|k| {
+                k.eq_ignore_ascii_case(&name)
+                    || k.to_ascii_uppercase().starts_with(&format!("{name}__"))
+            })
+            .collect();
+        full.sort();
+        if full.is_empty() {
+            full.push(name);
+        }
+        let noun = if full.len() == 1 {
+            "variable"
+        } else {
+            "variables"
+        };
+        return Some(format!("environment {noun} {}", full.join(", ")));
+    }
+    match &m.source {
+        Some(figment::Source::Code(_)) => None,
+        Some(s) => Some(s.to_string()),
+        None => Some(m.name.to_string()),
+    }
+}
 
 /// One configuration error: the key, what is wrong, and where the value came
 /// from (the file, or the environment variable by its name).
 fn describe(e: figment::Error) -> String {
-    let key = e.path.join(".").to_ascii_lowercase();
-    let from = match &e.metadata {
-        Some(m) if m.name.contains("environment") => {
-            let upper: Vec<String> = e.path.iter().map(|p| p.to_ascii_uppercase()).collect();
-            format!("environment variable {ENV_PREFIX}{}", upper.join("__"))
+    let mut path: Vec<&str> = e.path.iter().map(String::as_str).collect();
+    if let figment::error::Kind::UnknownField(name, _) = &e.kind {
+        // the unknown key itself, so its source is named in full
+        if path.last() != Some(&name.as_str()) {
+            path.push(name);
         }
-        Some(m) => m
-            .source
-            .as_ref()
-            .map_or_else(|| m.name.to_string(), |s| s.to_string()),
-        None => "configuration".into(),
-    };
+    }
+    let key = e.path.join(".").to_ascii_lowercase();
+    let from = e
+        .metadata
+        .as_ref()
+        .and_then(|m| source(m, &path))
+        .unwrap_or_else(|| "configuration".into());
     if key.is_empty() {
         format!("{} ({from})", e.kind)
     } else {
@@ -216,20 +305,19 @@ impl Config {
     /// environment variables; checked.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         if !path.is_file() {
-            return Err(ConfigError(format!(
+            return Err(ConfigError::new(format!(
                 "{}: configuration file not found",
                 path.display()
             )));
         }
-        let config: Config = Figment::from(Serialized::defaults(Config::default()))
+        let figment = Figment::from(Serialized::defaults(Config::default()))
             .merge(Toml::file_exact(path))
-            .merge(Env::prefixed(ENV_PREFIX).split("__"))
-            .extract()
-            .map_err(|e| {
-                let all: Vec<String> = e.into_iter().map(describe).collect();
-                ConfigError(format!("invalid configuration: {}", all.join("; ")))
-            })?;
-        config.check()?;
+            .merge(Env::prefixed(ENV_PREFIX).split("__"));
+        let config: Config = figment.extract().map_err(|e| {
+            let all: Vec<String> = e.into_iter().map(describe).collect();
+            ConfigError::new(format!("invalid configuration: {}", all.join("; ")))
+        })?;
+        config.check().map_err(|e| e.with_sources(&figment))?;
         Ok(config)
     }
 
@@ -256,7 +344,7 @@ impl Config {
 
     /// Values serde accepts but the service cannot work with.
     pub fn check(&self) -> Result<(), ConfigError> {
-        let bad = |key: &str, why: String| Err(ConfigError(format!("{key}: {why}")));
+        let bad = |key: &str, why: String| Err(ConfigError::at(key, why));
         let s = &self.search;
         if let Err(e) = self.default_rule() {
             return bad("search.rule / search.threshold", e);
@@ -300,6 +388,22 @@ impl Config {
         }
         if l.deadline_ms == 0 {
             return bad("limits.deadline_ms", "must be at least 1".into());
+        }
+        for (key, value) in [
+            ("server.max_connections", self.server.max_connections as u64),
+            ("server.header_timeout_ms", self.server.header_timeout_ms),
+            ("server.body_timeout_ms", self.server.body_timeout_ms),
+            ("limits.headers", l.headers as u64),
+        ] {
+            if value == 0 {
+                return bad(key, "must be at least 1".into());
+            }
+        }
+        if l.header_bytes < 1024 {
+            return bad(
+                "limits.header_bytes",
+                format!("must be at least 1024, got {}", l.header_bytes),
+            );
         }
         if self.server.workers > 4096 {
             return bad(
@@ -356,6 +460,11 @@ impl Config {
 
     pub fn deadline(&self) -> Duration {
         Duration::from_millis(self.limits.deadline_ms)
+    }
+
+    /// After SIGTERM, how long requests in flight may still take.
+    pub fn drain(&self) -> Duration {
+        Duration::from_millis(self.server.drain_ms)
     }
 }
 
@@ -447,6 +556,14 @@ mod tests {
             ("[search]\ntop_n = 101\n", "search.top_n"),
             ("[search]\nblock = 0\n", "search.block"),
             ("[limits]\ndeadline_ms = 0\n", "limits.deadline_ms"),
+            ("[server]\nmax_connections = 0\n", "server.max_connections"),
+            (
+                "[server]\nheader_timeout_ms = 0\n",
+                "server.header_timeout_ms",
+            ),
+            ("[server]\nbody_timeout_ms = 0\n", "server.body_timeout_ms"),
+            ("[limits]\nheaders = 0\n", "limits.headers"),
+            ("[limits]\nheader_bytes = 100\n", "limits.header_bytes"),
             ("[search]\nrule = \"fastest\"\n", "fastest"),
             (
                 "[search]\nrule = \"fixed\"\n",
@@ -473,6 +590,31 @@ mod tests {
             let e = load_str(toml, &[]).unwrap_err();
             assert!(e.contains(expected), "{toml:?}: {e}");
         }
+    }
+
+    #[test]
+    fn errors_name_the_source_of_the_value() {
+        // a value the checks refuse, from the environment
+        let e = load_str("", &[("BOWLOC_SEARCH__RULE", "relativ")]).unwrap_err();
+        assert!(
+            e.contains("search.rule from environment variable BOWLOC_SEARCH__RULE"),
+            "{e}"
+        );
+        // the same from the file
+        let e = load_str("[search]\nrule = \"relativ\"\n", &[]).unwrap_err();
+        assert!(
+            e.contains("search.rule from") && e.contains("c.toml"),
+            "{e}"
+        );
+        // an unknown section from the environment, named in full
+        let e = load_str("", &[("BOWLOC_SERVR__LISTEN", "0.0.0.0:1")]).unwrap_err();
+        assert!(
+            e.contains("servr") && e.contains("BOWLOC_SERVR__LISTEN"),
+            "{e}"
+        );
+        // a value the checks refuse from the defaults names no source
+        let e = load_str("[search]\ntop_n = 0\n", &[("BOWLOC_LIMITS__QUEUE", "3")]).unwrap_err();
+        assert!(!e.contains("BOWLOC_LIMITS__QUEUE"), "{e}");
     }
 
     #[test]

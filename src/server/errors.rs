@@ -2,7 +2,8 @@
 //! machine-readable code and a message, sent as JSON
 //! `{"error": {"code": "...", "message": "..."}}` (also for protobuf
 //! clients), with `Retry-After` where waiting helps. Each error response is
-//! counted in the rejected-requests metric under its code.
+//! counted by status and code, and a 503 also as a rejection. [`CODES`]
+//! lists every code with its status.
 
 use crate::features::FeatureError;
 use axum::Json;
@@ -23,7 +24,38 @@ pub struct ErrorDetail {
     pub code: String,
     /// What went wrong, for people.
     pub message: String,
+    /// With `not_ready`: what loading the map is doing now, e.g.
+    /// `k-means: Lloyd iterations 12/40`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub step: Option<String>,
 }
+
+/// Every error code the service answers with, and its status.
+pub const CODES: &[(u16, &str)] = &[
+    (400, "invalid_parameter"),
+    (400, "unknown_rule"),
+    (400, "empty_body"),
+    (400, "invalid_multipart"),
+    (400, "missing_image_field"),
+    (400, "body_read_error"),
+    (404, "not_found"),
+    (405, "method_not_allowed"),
+    (408, "request_timeout"),
+    (408, "body_timeout"),
+    (413, "body_too_large"),
+    (415, "unsupported_media_type"),
+    (415, "unsupported_image_format"),
+    (422, "undecodable_image"),
+    (422, "image_too_large"),
+    (422, "extraction_failed"),
+    (431, "headers_too_large"),
+    (500, "internal"),
+    (503, "not_ready"),
+    (503, "overloaded"),
+    (503, "queue_timeout"),
+    (503, "deadline_exceeded"),
+    (503, "shutting_down"),
+];
 
 /// An error answer.
 #[derive(Debug, Clone, PartialEq)]
@@ -33,6 +65,8 @@ pub struct ApiError {
     pub message: String,
     /// Seconds for `Retry-After`.
     pub retry_after: Option<u32>,
+    /// The loading step, for `not_ready`.
+    pub step: Option<String>,
 }
 
 impl ApiError {
@@ -42,7 +76,13 @@ impl ApiError {
             code,
             message: message.into(),
             retry_after: None,
+            step: None,
         }
+    }
+
+    pub fn with_step(mut self, step: String) -> Self {
+        self.step = Some(step);
+        self
     }
 
     fn retry_after(mut self, seconds: u32) -> Self {
@@ -109,6 +149,44 @@ impl ApiError {
         .retry_after(1)
     }
 
+    /// The deadline passed before the work on the request began (or before
+    /// the search voted a single feature); nothing more is done.
+    pub fn deadline_exceeded() -> Self {
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "deadline_exceeded",
+            "the request's deadline passed before its search could begin; retry later",
+        )
+        .retry_after(1)
+    }
+
+    /// The body was still arriving when the request's deadline passed.
+    pub fn request_timeout() -> Self {
+        Self::new(
+            StatusCode::REQUEST_TIMEOUT,
+            "request_timeout",
+            "the request body did not arrive before the request's deadline",
+        )
+    }
+
+    /// The body stopped arriving for longer than `server.body_timeout_ms`.
+    pub fn body_timeout() -> Self {
+        Self::new(
+            StatusCode::REQUEST_TIMEOUT,
+            "body_timeout",
+            "the request body stopped arriving",
+        )
+    }
+
+    /// More header fields or header bytes than the limits allow.
+    pub fn headers_too_large(message: impl Into<String>) -> Self {
+        Self::new(
+            StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+            "headers_too_large",
+            message,
+        )
+    }
+
     pub fn not_ready(message: impl Into<String>) -> Self {
         Self::new(StatusCode::SERVICE_UNAVAILABLE, "not_ready", message).retry_after(5)
     }
@@ -143,6 +221,7 @@ impl ApiError {
             error: ErrorDetail {
                 code: self.code.to_owned(),
                 message: self.message.clone(),
+                step: self.step.clone(),
             },
         }
     }
@@ -176,7 +255,7 @@ impl From<FeatureError> for ApiError {
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        super::metrics::rejected(self.code);
+        super::metrics::error(self.status.as_u16(), self.code);
         let mut response = (self.status, Json(self.body())).into_response();
         if let Some(s) = self.retry_after {
             response
@@ -219,6 +298,60 @@ mod tests {
         for (e, status, code) in cases {
             let a = ApiError::from(e);
             assert_eq!((a.status.as_u16(), a.code), (status, code));
+        }
+    }
+
+    /// The codes in docs/service.md's error table, with their statuses.
+    fn documented_codes() -> Vec<(u16, String)> {
+        let doc = include_str!("../../docs/service.md");
+        let table = doc
+            .split("Errors are always JSON")
+            .nth(1)
+            .expect("docs/service.md has the error table");
+        let mut codes = Vec::new();
+        for line in table.lines().skip_while(|l| !l.starts_with('|')) {
+            let Some(row) = line.strip_prefix("| ") else {
+                break;
+            };
+            let mut cells = row.split(" | ");
+            let statuses: Vec<u16> = cells
+                .next()
+                .unwrap_or("")
+                .split(|c: char| !c.is_ascii_digit())
+                .filter_map(|s| s.parse().ok())
+                .collect();
+            let rest = cells.next().unwrap_or("");
+            for code in rest.split('`').skip(1).step_by(2) {
+                if code.chars().all(|c| c.is_ascii_lowercase() || c == '_') {
+                    codes.push((statuses.clone(), code.to_owned()));
+                }
+            }
+        }
+        codes
+            .into_iter()
+            .map(|(statuses, code)| {
+                let status = CODES
+                    .iter()
+                    .find(|(_, c)| *c == code)
+                    .map(|(s, _)| *s)
+                    .unwrap_or_else(|| panic!("documented code `{code}` is not in CODES"));
+                assert!(
+                    statuses.contains(&status),
+                    "`{code}` is documented under {statuses:?}, answered with {status}"
+                );
+                (status, code)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn every_code_is_documented_with_its_status() {
+        let documented = documented_codes();
+        for (status, code) in CODES {
+            assert!(
+                documented.iter().any(|(s, c)| s == status && c == code),
+                "{status} `{code}` is missing from docs/service.md's error table"
+            );
         }
     }
 

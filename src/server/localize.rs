@@ -4,6 +4,7 @@
 
 use super::AppState;
 use super::errors::{ApiError, ErrorBody};
+use super::openapi::Binary;
 use super::proto;
 use super::workers::PoolError;
 use crate::features::TileGrid;
@@ -47,7 +48,8 @@ pub struct LocalizeParams {
     #[param(value_type = Option<u32>, minimum = 4, maximum = 1000)]
     pub inliers: Option<String>,
     /// Seed of the feature permutation (0 to 2^64−1). Without it each request
-    /// draws its own; the answer reports the seed used.
+    /// draws its own, below 2^53 so that it survives a JSON number; the
+    /// answer reports the seed used.
     #[param(value_type = Option<u64>)]
     pub seed: Option<String>,
     /// Drop candidates scoring below this (≥ 0).
@@ -116,7 +118,7 @@ impl LocalizeParams {
                     format!("`{v}` is not a whole number in 0..={}", u64::MAX),
                 )
             })?,
-            None => rand::random(),
+            None => crate::report::draw_seed(),
         };
         if let Some(v) = &self.min_score {
             let s = number("min_score", v)?;
@@ -261,16 +263,31 @@ fn body_kind(headers: &HeaderMap) -> Result<BodyKind, ApiError> {
     }
 }
 
-/// Whether a body error is the size limit.
-fn is_length_limit(e: &(dyn std::error::Error + 'static)) -> bool {
+/// Whether a body error was caused by a `T` (the size limit, a timeout).
+fn caused_by<T: std::error::Error + 'static>(e: &(dyn std::error::Error + 'static)) -> bool {
     let mut cause: Option<&(dyn std::error::Error + 'static)> = Some(e);
     while let Some(c) = cause {
-        if c.is::<http_body_util::LengthLimitError>() {
+        if c.is::<T>() {
             return true;
         }
         cause = c.source();
     }
     false
+}
+
+/// The answer to a body that could not be read whole.
+fn body_error(
+    e: &(dyn std::error::Error + 'static),
+    limit: usize,
+    otherwise: ApiError,
+) -> ApiError {
+    if caused_by::<http_body_util::LengthLimitError>(e) {
+        ApiError::body_too_large(limit)
+    } else if caused_by::<tower_http::timeout::TimeoutError>(e) {
+        ApiError::body_timeout()
+    } else {
+        otherwise
+    }
 }
 
 /// The image bytes of the request.
@@ -290,11 +307,12 @@ async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiErro
             .await
             .map_err(|e| {
                 let e = e.into_inner();
-                if is_length_limit(e.as_ref()) {
-                    ApiError::body_too_large(limit)
-                } else {
-                    ApiError::bad_request("body_read_error", format!("cannot read the body: {e}"))
-                }
+                let message = format!("cannot read the body: {e}");
+                body_error(
+                    e.as_ref(),
+                    limit,
+                    ApiError::bad_request("body_read_error", message),
+                )
             }),
         BodyKind::Multipart => {
             // The body limit applies through the router's DefaultBodyLimit.
@@ -305,7 +323,8 @@ async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiErro
                 if e.status() == axum::http::StatusCode::PAYLOAD_TOO_LARGE {
                     ApiError::body_too_large(limit)
                 } else {
-                    ApiError::bad_request("invalid_multipart", e.body_text())
+                    let otherwise = ApiError::bad_request("invalid_multipart", e.body_text());
+                    body_error(&e, limit, otherwise)
                 }
             };
             let mut image = None;
@@ -355,9 +374,9 @@ pub struct LocalizeSummary {
     request_body(
         description = "The query image (JPEG, PNG, BMP, TIFF, WebP, PNM), raw or as multipart field `image`.",
         content(
-            (Vec<u8> = "image/jpeg"),
-            (Vec<u8> = "image/png"),
-            (Vec<u8> = "application/octet-stream"),
+            (Binary = "image/jpeg"),
+            (Binary = "image/png"),
+            (Binary = "application/octet-stream"),
             (ImageUpload = "multipart/form-data"),
         ),
     ),
@@ -365,13 +384,15 @@ pub struct LocalizeSummary {
         (status = 200, description = "Candidates best first, with features used, stop and timings.",
             content(
                 (Localization = "application/json"),
-                (Vec<u8> = "application/x-protobuf"),
+                (Binary = "application/x-protobuf"),
             )),
         (status = 400, description = "Bad parameter (`invalid_parameter`, `unknown_rule`), empty body (`empty_body`), bad multipart (`invalid_multipart`, also for two fields `image`; `missing_image_field`).", body = ErrorBody),
         (status = 413, description = "Body over `limits.body_bytes` (`body_too_large`).", body = ErrorBody),
         (status = 415, description = "Content type not accepted (`unsupported_media_type`), or an image format other than JPEG, PNG, BMP, TIFF, WebP and PNM, e.g. GIF (`unsupported_image_format`).", body = ErrorBody),
         (status = 422, description = "Not a decodable image (`undecodable_image`), more pixels than `limits.pixels` (`image_too_large`), extraction failed (`extraction_failed`).", body = ErrorBody),
-        (status = 503, description = "Map not loaded yet (`not_ready`), all workers busy and queue full (`overloaded`), or no worker free before the deadline (`queue_timeout`); see Retry-After.", body = ErrorBody,
+        (status = 408, description = "The body was still arriving at the request's deadline (`request_timeout`), or stopped arriving for `server.body_timeout_ms` (`body_timeout`).", body = ErrorBody),
+        (status = 431, description = "More header fields than `limits.headers`, or more header bytes than `limits.header_bytes` (`headers_too_large`).", body = ErrorBody),
+        (status = 503, description = "Map not loaded yet (`not_ready`), all workers busy and queue full (`overloaded`), no worker free before the deadline (`queue_timeout`), or the deadline passed before the search voted a feature (`deadline_exceeded`); see Retry-After.", body = ErrorBody,
             headers(("Retry-After" = u32, description = "Seconds to wait before retrying."))),
     )
 )]
@@ -389,13 +410,19 @@ pub async fn localize(
     let tiles = params.tiles(localizer.tiles)?;
     let verify = params.verify(state.config.verify.enabled)?;
     options.deadline = Some(deadline);
-    let image = read_image(&state, request).await?;
+    // A body still arriving at the deadline is not waited for.
+    let image = tokio::time::timeout_at(deadline.into(), read_image(&state, request))
+        .await
+        .map_err(|_| ApiError::request_timeout())??;
     // Format and pixel count from the header, before the image takes a worker.
     crate::features::probe(&image, localizer.limits)?;
     let answer = state
         .pool
         .run(Some(tokio::time::Instant::from_std(deadline)), move || {
-            localizer.localize_tiled(&image, &options, tiles, verify)
+            if Instant::now() >= deadline {
+                return Err(ApiError::deadline_exceeded()); // no work for a lost cause
+            }
+            Ok(localizer.localize_tiled(&image, &options, tiles, verify)?)
         })
         .await
         .map_err(|e| match e {
@@ -406,6 +433,9 @@ pub async fn localize(
                 ApiError::internal("the query failed unexpectedly")
             }
         })??;
+    if answer.stop.kind == crate::search::StopKind::Deadline && answer.features.used == 0 {
+        return Err(ApiError::deadline_exceeded()); // the deadline passed before any vote
+    }
     super::metrics::localized(&answer);
     let summary = LocalizeSummary {
         features: answer.features.total,
@@ -566,8 +596,10 @@ mod tests {
     #[test]
     fn seeds_are_drawn_when_absent() {
         let seeds: std::collections::HashSet<u64> =
-            (0..8).map(|_| parse("").unwrap().seed).collect();
+            (0..1000).map(|_| parse("").unwrap().seed).collect();
         assert!(seeds.len() > 1);
+        // JSON-safe: a u64 drawn at random would be above 2^53 but for 1 in 2048
+        assert!(seeds.iter().all(|&s| s <= crate::report::MAX_DRAWN_SEED));
     }
 
     #[test]

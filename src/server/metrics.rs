@@ -1,7 +1,11 @@
 //! Prometheus metrics: the recorder (installed once per process), the names
 //! and help texts of every metric the service exports, and small functions
 //! the handlers call to record them. Names follow Prometheus conventions:
-//! `bowloc_` prefix, base units (`_seconds`), `_total` for counters.
+//! `bowloc_` prefix, base units (`_seconds`), `_total` for counters. Labelled
+//! counters whose labels are known in advance are exported at 0 from the
+//! start. The process's own metrics (`process_resident_memory_bytes`,
+//! `process_open_fds`, `process_cpu_seconds_total`, …) are read at each
+//! scrape.
 
 use crate::index::MapIndex;
 use crate::report::Localization;
@@ -15,9 +19,13 @@ use std::time::Duration;
 pub const HTTP_REQUESTS: &str = "bowloc_http_requests_total";
 pub const HTTP_DURATION: &str = "bowloc_http_request_duration_seconds";
 pub const HTTP_IN_FLIGHT: &str = "bowloc_http_requests_in_flight";
+pub const HTTP_ERRORS: &str = "bowloc_http_errors_total";
 pub const REJECTED: &str = "bowloc_rejected_requests_total";
+pub const CONNECTIONS: &str = "bowloc_http_connections_open";
+pub const CONNECTION_ERRORS: &str = "bowloc_http_connection_errors_total";
+pub const LOCALIZE_DURATION: &str = "bowloc_localize_duration_seconds";
 pub const STAGE_DURATION: &str = "bowloc_localize_stage_duration_seconds";
-pub const FRACTION_USED: &str = "bowloc_localize_features_used_fraction";
+pub const RATIO_USED: &str = "bowloc_localize_features_used_ratio";
 pub const QUERY_FEATURES: &str = "bowloc_localize_query_features";
 pub const STOPS: &str = "bowloc_localize_stops_total";
 pub const VERIFY_DURATION: &str = "bowloc_verify_duration_seconds";
@@ -49,9 +57,7 @@ pub fn install() -> PrometheusHandle {
             let inliers = [0.0, 4.0, 8.0, 12.0, 16.0, 24.0, 32.0, 50.0, 100.0, 200.0];
             let handle = PrometheusBuilder::new()
                 .set_buckets_for_metric(Matcher::Suffix("_seconds".into()), &latency)
-                .and_then(|b| {
-                    b.set_buckets_for_metric(Matcher::Full(FRACTION_USED.into()), &fraction)
-                })
+                .and_then(|b| b.set_buckets_for_metric(Matcher::Full(RATIO_USED.into()), &fraction))
                 .and_then(|b| {
                     b.set_buckets_for_metric(Matcher::Full(QUERY_FEATURES.into()), &features)
                 })
@@ -62,6 +68,8 @@ pub fn install() -> PrometheusHandle {
                 .install_recorder()
                 .expect("no other metrics recorder is installed");
             describe();
+            zero_counters();
+            process().describe();
             gauge!(BUILD_INFO, "version" => env!("CARGO_PKG_VERSION")).set(1.0);
             handle
         })
@@ -80,17 +88,31 @@ fn describe() {
     );
     describe_gauge!(HTTP_IN_FLIGHT, "HTTP requests being answered now.");
     describe_counter!(
+        HTTP_ERRORS,
+        "Requests answered with an error, by status and error code."
+    );
+    describe_counter!(
         REJECTED,
-        "Requests answered with an error, by error code (reason)."
+        "Requests refused with 503 without being answered, by error code (reason): overloaded, queue_timeout, deadline_exceeded, not_ready, shutting_down."
+    );
+    describe_gauge!(CONNECTIONS, "TCP connections open now.");
+    describe_counter!(
+        CONNECTION_ERRORS,
+        "Connections that ended in an error before reaching a route, by kind: malformed_request (answered 400 or 414 by the HTTP layer), headers_too_large (431 from the HTTP layer), header_timeout (headers not complete within server.header_timeout_ms, idle connections included), incomplete_request, io, accept."
+    );
+    describe_histogram!(
+        LOCALIZE_DURATION,
+        Unit::Seconds,
+        "Time of a localization on its worker, all stages."
     );
     describe_histogram!(
         STAGE_DURATION,
         Unit::Seconds,
-        "Time per stage of a localization: decode, extract, quantize, vote and total."
+        "Time per stage of a localization: decode, extract, quantize and vote."
     );
     describe_histogram!(
-        FRACTION_USED,
-        "Fraction of a query's features used before the search stopped."
+        RATIO_USED,
+        "Ratio of a query's features used before the search stopped (0 to 1)."
     );
     describe_histogram!(QUERY_FEATURES, "Features extracted from a query image.");
     describe_counter!(
@@ -147,9 +169,64 @@ pub fn in_flight(delta: f64) {
     gauge!(HTTP_IN_FLIGHT).increment(delta);
 }
 
-/// A request answered with error `code`.
-pub fn rejected(code: &'static str) {
-    counter!(REJECTED, "reason" => code).increment(1);
+/// Kinds of [`CONNECTION_ERRORS`].
+pub const CONNECTION_ERROR_KINDS: [&str; 6] = [
+    "malformed_request",
+    "headers_too_large",
+    "header_timeout",
+    "incomplete_request",
+    "io",
+    "accept",
+];
+
+/// The labelled counters whose labels are known, at 0.
+fn zero_counters() {
+    for &(status, code) in super::errors::CODES {
+        counter!(HTTP_ERRORS, "status" => status.to_string(), "code" => code).absolute(0);
+        if status == 503 {
+            counter!(REJECTED, "reason" => code).absolute(0);
+        }
+    }
+    for kind in CONNECTION_ERROR_KINDS {
+        counter!(CONNECTION_ERRORS, "kind" => kind).absolute(0);
+    }
+    use crate::search::StopKind;
+    for kind in [StopKind::Rule, StopKind::Exhausted, StopKind::Deadline] {
+        counter!(STOPS, "kind" => super::proto::stop_kind_name(kind)).absolute(0);
+    }
+    for verified in ["true", "false"] {
+        counter!(VERIFIED, "verified" => verified).absolute(0);
+    }
+}
+
+/// The collector of the process's own metrics.
+fn process() -> &'static metrics_process::Collector {
+    static COLLECTOR: OnceLock<metrics_process::Collector> = OnceLock::new();
+    COLLECTOR.get_or_init(metrics_process::Collector::default)
+}
+
+/// Read the process's memory, open files and CPU time (before a scrape).
+pub fn collect_process() {
+    process().collect();
+}
+
+/// A request answered with an error; a 503 is also a rejection.
+pub fn error(status: u16, code: &'static str) {
+    counter!(HTTP_ERRORS, "status" => status.to_string(), "code" => code).increment(1);
+    if status == 503 {
+        counter!(REJECTED, "reason" => code).increment(1);
+    }
+}
+
+/// TCP connections open went up (`+1`) or down (`-1`).
+pub fn connections(delta: f64) {
+    gauge!(CONNECTIONS).increment(delta);
+}
+
+/// A connection ended in an error of this kind (one of
+/// [`CONNECTION_ERROR_KINDS`]).
+pub fn connection_error(kind: &'static str) {
+    counter!(CONNECTION_ERRORS, "kind" => kind).increment(1);
 }
 
 /// A localization answered.
@@ -160,11 +237,11 @@ pub fn localized(answer: &Localization) {
         ("extract", t.extract),
         ("quantize", t.quantize),
         ("vote", t.vote),
-        ("total", t.total),
     ] {
         histogram!(STAGE_DURATION, "stage" => stage).record(ms / 1e3);
     }
-    histogram!(FRACTION_USED).record(answer.features.fraction);
+    histogram!(LOCALIZE_DURATION).record(t.total / 1e3);
+    histogram!(RATIO_USED).record(answer.features.fraction);
     histogram!(QUERY_FEATURES).record(answer.features.total as f64);
     counter!(STOPS, "kind" => super::proto::stop_kind_name(answer.stop.kind)).increment(1);
     if let Some(verified) = answer.verified {

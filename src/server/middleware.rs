@@ -1,13 +1,14 @@
 //! What wraps every request: the request id (`x-request-id` taken from the
 //! client or generated, and echoed back), one log line per request with its
 //! id, route, status, latency and fraction of features used, the per-route
-//! request metrics, and turning a panic in a handler into a JSON 500.
+//! request metrics, the header limits (a JSON 431), and turning a panic in a
+//! handler into a JSON 500.
 
 use super::errors::ApiError;
 use super::localize::LocalizeSummary;
 use super::metrics;
 use super::workers::panic_message;
-use axum::extract::{MatchedPath, Request};
+use axum::extract::{MatchedPath, Request, State};
 use axum::http::HeaderName;
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
@@ -61,6 +62,43 @@ pub async fn observe(request: Request, next: Next) -> Response {
         ),
     }
     response
+}
+
+/// The most header fields, and bytes of header lines, a request may have.
+#[derive(Debug, Clone, Copy)]
+pub struct HeaderLimits {
+    pub fields: usize,
+    pub bytes: usize,
+}
+
+/// Answer 431 `headers_too_large` to a request over the header limits.
+pub async fn header_limits(
+    State(limits): State<HeaderLimits>,
+    request: Request,
+    next: Next,
+) -> Response {
+    let headers = request.headers();
+    // each line is `name: value` and CRLF
+    let bytes: usize = headers
+        .iter()
+        .map(|(name, value)| name.as_str().len() + value.len() + 4)
+        .sum();
+    if headers.len() > limits.fields {
+        return ApiError::headers_too_large(format!(
+            "the request has {} header fields; at most {} are accepted",
+            headers.len(),
+            limits.fields
+        ))
+        .into_response();
+    }
+    if bytes > limits.bytes {
+        return ApiError::headers_too_large(format!(
+            "the request's header fields take {bytes} bytes; at most {} are accepted",
+            limits.bytes
+        ))
+        .into_response();
+    }
+    next.run(request).await
 }
 
 /// Takes the in-flight gauge down again however the request ends.

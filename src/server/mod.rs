@@ -6,6 +6,8 @@
 //! refused, requests in flight finish, and [`run`] returns.
 //!
 //! - [`config`]: configuration (file, environment, flags) and its checks;
+//! - [`connections`]: accepting and serving connections (cap, timeouts,
+//!   drain), and what the HTTP layer answers by itself;
 //! - [`bootstrap`]: building a missing default map, then loading;
 //! - [`localize`]: `POST /localize`, its parameters and body;
 //! - [`status`]: health, readiness, `/map`, `/metrics`, `/openapi.json`;
@@ -17,6 +19,7 @@
 
 pub mod bootstrap;
 pub mod config;
+pub mod connections;
 pub mod errors;
 pub mod localize;
 pub mod metrics;
@@ -41,6 +44,7 @@ use tokio::net::TcpListener;
 use tower::ServiceBuilder;
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use tower_http::timeout::RequestBodyTimeoutLayer;
 use workers::WorkerPool;
 
 /// What every handler shares.
@@ -50,6 +54,8 @@ pub struct AppState {
     pub pool: WorkerPool,
     pub metrics: PrometheusHandle,
     localizer: OnceLock<Arc<Localizer>>,
+    /// What loading (or bootstrapping) the map is doing now.
+    loading: bootstrap::Progress,
     shutting_down: AtomicBool,
 }
 
@@ -79,6 +85,7 @@ impl AppState {
             pool,
             metrics,
             localizer: OnceLock::new(),
+            loading: bootstrap::Progress::default(),
             shutting_down: AtomicBool::new(false),
         }))
     }
@@ -101,12 +108,13 @@ impl AppState {
         }
     }
 
-    /// The loaded localizer, or 503 while loading.
+    /// The loaded localizer, or 503 `not_ready` naming the loading step.
     pub fn localizer(&self) -> Result<Arc<Localizer>, ApiError> {
-        self.localizer
-            .get()
-            .cloned()
-            .ok_or_else(|| ApiError::not_ready("the map is still loading; retry later"))
+        self.localizer.get().cloned().ok_or_else(|| {
+            let step = self.loading.step();
+            ApiError::not_ready(format!("the map is still loading ({step}); retry later"))
+                .with_step(step)
+        })
     }
 
     pub fn begin_shutdown(&self) {
@@ -122,6 +130,11 @@ impl AppState {
 /// Every route with its layers.
 pub fn router(state: Arc<AppState>) -> Router {
     let body_limit = state.config.limits.body_bytes;
+    let body_timeout = Duration::from_millis(state.config.server.body_timeout_ms);
+    let header_limits = middleware::HeaderLimits {
+        fields: state.config.limits.headers,
+        bytes: state.config.limits.header_bytes,
+    };
     Router::new()
         .route("/localize", post(localize::localize))
         .route("/healthz", get(status::healthz))
@@ -140,6 +153,11 @@ pub fn router(state: Arc<AppState>) -> Router {
                 .layer(PropagateRequestIdLayer::new(middleware::REQUEST_ID))
                 .layer(axum::middleware::from_fn(middleware::observe))
                 .layer(CatchPanicLayer::custom(middleware::panic_response))
+                .layer(axum::middleware::from_fn_with_state(
+                    header_limits,
+                    middleware::header_limits,
+                ))
+                .layer(RequestBodyTimeoutLayer::new(body_timeout))
                 .layer(DefaultBodyLimit::max(body_limit)),
         )
         .with_state(state)
@@ -165,13 +183,14 @@ pub async fn serve(
     let address = listener.local_addr()?;
     let (stop_tx, mut stop_rx) = tokio::sync::watch::channel(false);
     let app = router(state.clone());
-    let mut server = tokio::spawn(
-        axum::serve(listener, app)
-            .with_graceful_shutdown(async move {
-                let _ = stop_rx.wait_for(|stop| *stop).await;
-            })
-            .into_future(),
-    );
+    let mut server = tokio::spawn(connections::serve(
+        listener,
+        app,
+        connections::Settings::of(&state.config),
+        async move {
+            let _ = stop_rx.wait_for(|stop| *stop).await;
+        },
+    ));
     tracing::info!("listening on http://{address}");
     let upkeep = {
         let handle = state.metrics.clone();
@@ -183,9 +202,9 @@ pub async fn serve(
             }
         })
     };
-    let load_config = state.config.clone();
+    let loader_state = state.clone();
     let mut loader = Some(tokio::task::spawn_blocking(move || {
-        bootstrap::load(&load_config)
+        bootstrap::load(&loader_state.config, &loader_state.loading)
     }));
     tokio::pin!(shutdown);
     let outcome: anyhow::Result<()> = loop {
@@ -211,8 +230,7 @@ pub async fn serve(
             }
             ended = &mut server => {
                 break match ended {
-                    Ok(Ok(())) => Err(anyhow::anyhow!("the server stopped unexpectedly")),
-                    Ok(Err(e)) => Err(anyhow::anyhow!("the server failed: {e}")),
+                    Ok(()) => Err(anyhow::anyhow!("the server stopped unexpectedly")),
                     Err(e) => Err(anyhow::anyhow!("the server failed: {e}")),
                 };
             }
@@ -220,23 +238,29 @@ pub async fn serve(
     };
     state.begin_shutdown();
     let _ = stop_tx.send(true);
-    // Requests in flight have at most their deadline left; give them that.
-    let grace = state.config.deadline() + Duration::from_secs(2);
+    // Requests in flight have `server.drain_ms` to finish, workers included.
+    let grace = state.config.drain();
+    let drained_by = tokio::time::Instant::now() + grace;
     if !server.is_finished() && tokio::time::timeout(grace, &mut server).await.is_err() {
         tracing::warn!(
-            "connections still open {} s after shutdown began; stopping anyway",
-            grace.as_secs()
+            "connections still open {} ms after shutdown began; stopping anyway",
+            grace.as_millis()
         );
     }
     upkeep.abort();
     let pool = state.pool.clone();
     if !matches!(
-        tokio::task::spawn_blocking(move || pool.close(grace)).await,
+        tokio::task::spawn_blocking(move || {
+            // idle workers need a moment to take their stop message
+            let left = drained_by.saturating_duration_since(tokio::time::Instant::now());
+            pool.close(left.max(Duration::from_millis(100)))
+        })
+        .await,
         Ok(true)
     ) {
         tracing::warn!(
-            "workers still busy {} s after shutdown began; stopping anyway",
-            grace.as_secs()
+            "workers still busy {} ms after shutdown began; stopping anyway",
+            grace.as_millis()
         );
     }
     tracing::info!("stopped");

@@ -34,7 +34,7 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
     ),
     components(schemas(
         Localization, Candidate, FeatureUse, RuleReport, StopInfo, ImageSize, Timings,
-        MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload,
+        MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload, Binary,
     )),
     tags(
         (name = "localize", description = "Localize a query image against the loaded map."),
@@ -42,6 +42,13 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
     )
 )]
 struct ApiDoc;
+
+/// Raw bytes in a request or answer body (an image, a protobuf message):
+/// `type: string, format: binary`.
+#[derive(utoipa::ToSchema)]
+#[schema(value_type = String, format = Binary)]
+#[allow(dead_code)]
+pub struct Binary(Vec<u8>);
 
 /// The document.
 pub fn document() -> utoipa::openapi::OpenApi {
@@ -109,6 +116,28 @@ fn describe_rules(doc: &mut utoipa::openapi::OpenApi) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn binary_bodies_are_binary_strings_and_ranks_start_at_1() {
+        let v: serde_json::Value = serde_json::from_str(json()).unwrap();
+        let binary = &v["components"]["schemas"]["Binary"];
+        assert_eq!(binary["type"], "string");
+        assert_eq!(binary["format"], "binary");
+        let op = &v["paths"]["/localize"]["post"];
+        let bodies = op["requestBody"]["content"].as_object().unwrap();
+        for (media, content) in bodies {
+            if media != "multipart/form-data" {
+                assert_eq!(
+                    content["schema"]["$ref"], "#/components/schemas/Binary",
+                    "{media}"
+                );
+            }
+        }
+        let protobuf = &op["responses"]["200"]["content"]["application/x-protobuf"];
+        assert_eq!(protobuf["schema"]["$ref"], "#/components/schemas/Binary");
+        let rank = &v["components"]["schemas"]["Candidate"]["properties"]["rank"];
+        assert_eq!(rank["minimum"], 1);
+    }
 
     #[test]
     fn rule_parameter_lists_every_rule() {

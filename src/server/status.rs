@@ -34,7 +34,7 @@ pub async fn healthz() -> Json<Status> {
 #[utoipa::path(get, path = "/readyz", tag = "operations",
     responses(
         (status = 200, description = "Ready for traffic.", body = Status),
-        (status = 503, description = "Still loading or building the map (`not_ready`), or shutting down (`shutting_down`).", body = ErrorBody),
+        (status = 503, description = "Still loading or building the map (`not_ready`; `error.step` names the step, e.g. `Lloyd iterations 12/40` while k-means trains the default vocabulary), or shutting down (`shutting_down`).", body = ErrorBody),
     ))]
 pub async fn readyz(State(state): State<Arc<AppState>>) -> Result<Json<Status>, ApiError> {
     if state.is_shutting_down() {
@@ -89,6 +89,7 @@ pub async fn map(State(state): State<Arc<AppState>>) -> Result<Json<MapInfo>, Ap
     responses((status = 200, description = "Prometheus text exposition format 0.0.4.",
         content_type = "text/plain", body = String)))]
 pub async fn metrics(State(state): State<Arc<AppState>>) -> Response {
+    super::metrics::collect_process();
     let pool = &state.pool;
     let busy = pool.busy();
     super::metrics::pool(

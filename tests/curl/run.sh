@@ -83,9 +83,10 @@ enabled = false
 TOML
 }
 
-# start_server CONFIG LOG: starts it, sets PID and BASE, waits for /readyz.
-start_server() {
-  "$BIN" serve --config "$1" >"$2" 2>&1 &
+# launch CONFIG LOG [DIR]: starts it (in DIR, default here), sets PID and
+# BASE once it listens.
+launch() {
+  (cd "${3:-.}" && exec "$BIN" serve --config "$1") >"$2" 2>&1 &
   PID=$!
   SERVER_PIDS+=("$PID")
   local port="" i
@@ -97,6 +98,12 @@ start_server() {
   done
   [ -n "$port" ] || { cat "$2"; return 1; }
   BASE="http://127.0.0.1:$port"
+}
+
+# start_server CONFIG LOG: starts it, sets PID and BASE, waits for /readyz.
+start_server() {
+  launch "$1" "$2" || return 1
+  local i
   for i in $(seq 1 300); do
     [ "$(curl -s -o /dev/null -w '%{http_code}' "$BASE/readyz")" = 200 ] && return 0
     kill -0 "$PID" 2>/dev/null || break
@@ -106,12 +113,14 @@ start_server() {
   return 1
 }
 
-# startup_fails NAME TEXT CONFIG [VAR=VALUE...]: `serve` exits non-zero within
-# 60 s and its output contains TEXT.
+# startup_fails NAME TEXT CONFIG [VAR=VALUE...] [-- SERVE-FLAGS...]: `serve`
+# exits non-zero within 60 s and its output contains TEXT.
 startup_fails() {
-  local name=$1 text=$2 config=$3 out rc
+  local name=$1 text=$2 config=$3 out rc vars=()
   shift 3
-  out=$(env "$@" timeout 60 "$BIN" serve --config "$config" 2>&1)
+  while [ $# -gt 0 ] && [ "$1" != -- ]; do vars+=("$1"); shift; done
+  [ "${1:-}" = -- ] && shift
+  out=$(env "${vars[@]}" timeout 60 "$BIN" serve --config "$config" "$@" 2>&1)
   rc=$?
   if [ "$rc" != 0 ] && [ "$rc" != 124 ] && grep -qF -- "$text" <<<"$out"; then
     ok "start-up fault: $name → exit $rc, names \"$text\""
@@ -282,19 +291,39 @@ metric() { # metric NAME{LABELS}: its value in a fresh scrape (0 if absent)
   curl -s "$BASE/metrics" | awk -v k="$1" '$1 == k { v = $2 } END { print v + 0 }'
 }
 ok200='bowloc_http_requests_total{route="/localize",method="POST",status="200"}'
-total_count='bowloc_localize_stage_duration_seconds_count{stage="total"}'
-rejected='bowloc_rejected_requests_total{reason="unknown_rule"}'
-before=$(metric "$ok200"); stages_before=$(metric "$total_count"); rejected_before=$(metric "$rejected")
+total_count='bowloc_localize_duration_seconds_count'
+extract_count='bowloc_localize_stage_duration_seconds_count{stage="extract"}'
+unknown_rule='bowloc_http_errors_total{status="400",code="unknown_rule"}'
+before=$(metric "$ok200"); stages_before=$(metric "$total_count"); extract_before=$(metric "$extract_count")
+errors_before=$(metric "$unknown_rule")
+rejections_before=$(curl -s "$BASE/metrics" | awk '/^bowloc_rejected_requests_total/ { n += $2 } END { print n + 0 }')
 req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize" >/dev/null
 req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=fastest" >/dev/null
 check "requests counter moves" test "$(metric "$ok200")" -eq $((before + 1))
-check "stage latency histogram moves" test "$(metric "$total_count")" -eq $((stages_before + 1))
-check "rejected counter moves by reason" test "$(metric "$rejected")" -eq $((rejected_before + 1))
+check "localization latency histogram moves" test "$(metric "$total_count")" -eq $((stages_before + 1))
+check "stage latency histogram moves" test "$(metric "$extract_count")" -eq $((extract_before + 1))
+check "errors counter moves by status and code" test "$(metric "$unknown_rule")" -eq $((errors_before + 1))
+rejections_after=$(curl -s "$BASE/metrics" | awk '/^bowloc_rejected_requests_total/ { n += $2 } END { print n + 0 }')
+check "a 400 is not counted as a rejection ($rejections_before → $rejections_after)" \
+  test "$rejections_after" = "$rejections_before"
 curl -s "$BASE/metrics" >"$TMP/metrics.txt"
-for name in bowloc_http_request_duration_seconds_bucket bowloc_localize_features_used_fraction_bucket \
+for name in bowloc_http_request_duration_seconds_bucket bowloc_localize_features_used_ratio_bucket \
   bowloc_localize_query_features_bucket bowloc_http_requests_in_flight bowloc_map_images \
-  bowloc_map_words bowloc_workers_busy bowloc_queue_waiting bowloc_localize_stops_total; do
+  bowloc_map_words bowloc_workers_busy bowloc_queue_waiting bowloc_localize_stops_total \
+  bowloc_localize_duration_seconds_bucket bowloc_http_connections_open; do
   check "metrics export $name" grep -q "^$name" "$TMP/metrics.txt"
+done
+check "no stage=\"total\" in the stage histogram" sh -c "! grep -q 'stage=\"total\"' '$TMP/metrics.txt'"
+check "the old name ..._features_used_fraction is gone" sh -c "! grep -q 'features_used_fraction' '$TMP/metrics.txt'"
+for series in 'bowloc_rejected_requests_total{reason="deadline_exceeded"}' \
+  'bowloc_http_errors_total{status="408",code="body_timeout"}' \
+  'bowloc_http_connection_errors_total{kind="malformed_request"}' \
+  'bowloc_localize_stops_total{kind="deadline"}'; do
+  check "labelled counter exported before it moves: $series" grep -qF "$series " "$TMP/metrics.txt"
+done
+for name in process_resident_memory_bytes process_open_fds process_cpu_seconds_total; do
+  check "process metric $name is exported and positive" \
+    awk -v k="$name" '$1 == k && $2 > 0 { found = 1 } END { exit !found }' "$TMP/metrics.txt"
 done
 check "metrics is Prometheus text" sh -c "curl -s -D - -o /dev/null '$BASE/metrics' | grep -qi '^content-type: text/plain; version=0.0.4'"
 check "map gauge holds the map size" grep -qx 'bowloc_map_images 40' "$TMP/metrics.txt"
@@ -334,15 +363,13 @@ rc=$?
 check "SIGTERM stops the server with exit status 0" test "$rc" = 0
 check "shutdown is logged" grep -q 'stopped' "$TMP/server.log"
 
-# --- a second server: deadline and overload ----------------------------------
+# --- a second server: max_features and overload -------------------------------
 # It also keeps at most 50 features per query (limits.max_features); the
 # first server found more in the same image.
-write_config "$TMP/tight.toml" 1 0 1 50
+write_config "$TMP/tight.toml" 1 0 10000 50
 if start_server "$TMP/tight.toml" "$TMP/tight.log"; then
-  ok "server with a 1 ms deadline starts"
+  ok "server with one worker and no queue starts"
   status=$(req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize")
-  check "a search past its deadline returns the answer so far" jqt --arg s "$status" '
-    $s == "200" and .stop.kind == "deadline" and .features.used < .features.total' "$B"
   check "limits.max_features caps the features of a query ($(jq .features.total "$TMP/first.json") → $(jq .features.total "$B"))" \
     jqt --slurpfile first "$TMP/first.json" '.features.total == 50 and $first[0].features.total > 50' "$B"
   # One worker, no queue: of requests sent at once, those beyond the first
@@ -370,7 +397,7 @@ if start_server "$TMP/tight.toml" "$TMP/tight.log"; then
   kill -TERM "$PID"; wait "$PID"
   check "second server exits 0" test $? = 0
 else
-  fail "server with a 1 ms deadline starts"
+  fail "server with one worker and no queue starts"
 fi
 
 # --- start-up faults: exit status non-zero, the message names the cause -------
@@ -406,6 +433,202 @@ startup_fails "unknown config key" "top_m" "$TMP/unknown-key.toml"
 startup_fails "bad config value" "search.top_n" "$TMP/bad-value.toml"
 startup_fails "bad environment value" "limits.queue: invalid type: found string \"lots\", expected usize (environment variable BOWLOC_LIMITS__QUEUE)" \
   "$TMP/config.toml" BOWLOC_LIMITS__QUEUE=lots
+startup_fails "rule misspelt in the environment" "(search.rule from environment variable BOWLOC_SEARCH__RULE)" \
+  "$TMP/config.toml" BOWLOC_SEARCH__RULE=relativ
+startup_fails "unknown section in the environment" "environment variable BOWLOC_SERVR__LISTEN" \
+  "$TMP/config.toml" BOWLOC_SERVR__LISTEN=0.0.0.0:1
+mkdir -p "$TMP/a-directory"
+with_files dir-map "$V" "$TMP/a-directory"
+startup_fails "a directory as the map" "a-directory: is a directory, not a map file" "$TMP/dir-map.toml"
+
+# --- connections: timeouts, cap, headers, seeds --------------------------------
+# A server with 1 s header and body timeouts and at most 4 connections.
+write_config "$TMP/conn.toml" 1 4 10000
+sed -i '/^log_format/a max_connections = 4\nheader_timeout_ms = 1000\nbody_timeout_ms = 1000\ndrain_ms = 1000' "$TMP/conn.toml"
+if start_server "$TMP/conn.toml" "$TMP/conn.log"; then
+  ok "server with 1 s header and body timeouts and at most 4 connections starts"
+  PORT=${BASE##*:}
+  # raw PAYLOAD: send PAYLOAD (a printf format) on a new connection, keep what
+  # comes back in $TMP/raw, print the seconds until the server closed it.
+  raw() {
+    local start end
+    start=$(date +%s.%N)
+    exec 7<>"/dev/tcp/127.0.0.1/$PORT"
+    # shellcheck disable=SC2059
+    [ -n "$1" ] && printf "$1" >&7
+    timeout 10 cat <&7 >"$TMP/raw"
+    end=$(date +%s.%N)
+    exec 7<&- 7>&-
+    awk -v a="$start" -v b="$end" 'BEGIN { printf "%.2f", b - a }'
+  }
+  # at_timeout SECONDS: closed between 0.8 s and 2.5 s (the timeout is 1 s)
+  at_timeout() { awk -v x="$1" 'BEGIN { exit !(x >= 0.8 && x <= 2.5) }'; }
+  closed_silently() { at_timeout "$1" && test ! -s "$TMP/raw"; }
+  answered_408() {
+    at_timeout "$1" && head -1 "$TMP/raw" | grep -q '^HTTP/1.1 408' && grep -q '"code":"body_timeout"' "$TMP/raw"
+  }
+  t=$(raw '')
+  check "an idle connection is closed at the header timeout (${t} s, no answer)" closed_silently "$t"
+  t=$(raw 'GET /healthz HTTP/1.1\r\nHost: x\r\nX-Half: ')
+  check "a connection that stops inside its headers is closed at the header timeout (${t} s)" closed_silently "$t"
+  t=$(raw 'POST /localize HTTP/1.1\r\nHost: x\r\nContent-Type: image/jpeg\r\nContent-Length: 1000\r\n\r\n')
+  check "Content-Length: 1000 and no body → 408 body_timeout, closed (${t} s: $(head -1 "$TMP/raw" | tr -d '\r'))" \
+    answered_408 "$t"
+  # The cap: four idle connections hold every place; a fifth waits (curl
+  # gives up after 0.5 s) until the idle ones time out.
+  exec 3<>"/dev/tcp/127.0.0.1/$PORT" 4<>"/dev/tcp/127.0.0.1/$PORT" 5<>"/dev/tcp/127.0.0.1/$PORT" 6<>"/dev/tcp/127.0.0.1/$PORT"
+  sleep 0.2
+  capped=$(curl -s -o /dev/null -w '%{http_code}' --max-time 0.5 "$BASE/healthz")
+  sleep 1.5
+  freed=$(curl -s -o /dev/null -w '%{http_code}' --max-time 5 "$BASE/healthz")
+  exec 3<&- 4<&- 5<&- 6<&-
+  check "with 4 connections open a 5th waits (got $capped) and is served once they close (got $freed)" \
+    test "$capped/$freed" = "000/200"
+
+  # Header limits (limits.headers = 100, limits.header_bytes = 64 KiB): over
+  # them a JSON 431; over four times them, hyper's own empty 431, counted.
+  too_large='bowloc_http_connection_errors_total{kind="headers_too_large"}'
+  malformed='bowloc_http_connection_errors_total{kind="malformed_request"}'
+  many=(); for i in $(seq 1 150); do many+=(-H "X-Pad-$i: x"); done
+  expect "150 header fields" 431 headers_too_large "${many[@]}" "$BASE/healthz"
+  pad=$(head -c 50000 /dev/zero | tr '\0' a)
+  expect "100 kB of header fields" 431 headers_too_large -H "X-A: $pad" -H "X-B: $pad" "$BASE/healthz"
+  before=$(metric "$too_large")
+  lots=(); for i in $(seq 1 500); do lots+=(-H "X-Pad-$i: x"); done
+  status=$(req "$B" "${lots[@]}" "$BASE/healthz")
+  check "500 header fields → bare 431 from the HTTP layer ($(stat -c %s "$B") bytes), counted" \
+    test "$status/$(stat -c %s "$B")/$(metric "$too_large")" = "431/0/$((before + 1))"
+  status=$(req "$B" -H "X-A: $pad" -H "X-B: $pad" -H "X-C: $pad" -H "X-D: $pad" -H "X-E: $pad" -H "X-F: $pad" "$BASE/healthz")
+  check "300 kB of header fields → bare 431 from the HTTP layer, counted" \
+    test "$status/$(metric "$too_large")" = "431/$((before + 2))"
+  before=$(metric "$malformed")
+  raw 'GARBAGE\r\n\r\n' >/dev/null
+  check "a malformed request line → bare 400 from the HTTP layer ($(head -1 "$TMP/raw" | tr -d '\r')), counted" \
+    test "$(head -1 "$TMP/raw" | cut -d' ' -f2)/$(metric "$malformed")" = "400/$((before + 1))"
+  check "the HTTP layer's answers are logged" grep -q 'answered 400 by the HTTP layer' "$TMP/conn.log"
+
+  # Seeds drawn by the server survive a JSON number (below 2^53); any u64
+  # given is taken and reported as given.
+  seeds=()
+  for i in 1 2 3 4 5 6 7 8; do
+    req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=none" >/dev/null
+    seeds+=("$(grep -o '"seed":[0-9]*' "$B" | cut -d: -f2)")
+  done
+  safe=yes
+  for seed in "${seeds[@]}"; do
+    { [ -n "$seed" ] && [ "${#seed}" -le 16 ] && [ "$seed" -le 9007199254740991 ]; } || safe=no
+  done
+  check "drawn seeds are below 2^53 (${seeds[*]})" test "$safe" = yes
+  status=$(req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?seed=18446744073709551615")
+  given_seed() { test "$status" = 200 && grep -q '"seed":18446744073709551615' "$B"; }
+  check "seed 2^64-1 is taken and reported as given" given_seed
+
+  # server.drain_ms = 1000: SIGTERM during an upload that sends 10 bytes
+  # every 0.2 s (never pausing for the 1 s body timeout) for 4 s; the
+  # process gives it 1 s, then exits 0 anyway, saying so.
+  {
+    printf 'POST /localize HTTP/1.1\r\nHost: x\r\nContent-Type: image/jpeg\r\nContent-Length: 100000\r\n\r\n'
+    for i in $(seq 1 20); do printf 'xxxxxxxxxx'; sleep 0.2; done
+  } 2>/dev/null >"/dev/tcp/127.0.0.1/$PORT" &
+  slow=$!
+  sleep 0.5
+  start=$(date +%s.%N)
+  kill -TERM "$PID"; wait "$PID"
+  rc=$?
+  t=$(awk -v a="$start" -v b="$(date +%s.%N)" 'BEGIN { printf "%.2f", b - a }')
+  kill "$slow" 2>/dev/null; wait "$slow" 2>/dev/null
+  drained() {
+    test "$rc" = 0 && awk -v x="$t" 'BEGIN { exit !(x >= 0.9 && x <= 3) }' \
+      && grep -q 'connections still open 1000 ms after shutdown began' "$TMP/conn.log"
+  }
+  check "SIGTERM with a request still uploading: exit $rc after ${t} s (server.drain_ms = 1000)" drained
+else
+  fail "server with 1 s header and body timeouts and at most 4 connections starts"
+fi
+
+# --- deadlines: no work for a request whose deadline has passed ----------------
+# deadline_ms = 30: a slow upload is cut off at the deadline with 408; a
+# request whose deadline passes before its search votes (here: while the
+# whole image is extracted, tiles=1x1) is 503 deadline_exceeded and adds
+# nothing to the features-used histogram.
+write_config "$TMP/deadline.toml" 1 4 30
+if start_server "$TMP/deadline.toml" "$TMP/deadline.log"; then
+  ok "server with a 30 ms deadline starts"
+  ratio_count=bowloc_localize_features_used_ratio_count
+  before=$(metric "$ratio_count")
+  # (no `Expect: 100-continue`: curl would wait up to 1 s before sending)
+  answer=$(curl -s -o "$B" -w '%{http_code} %{time_total}' --limit-rate 4k -H 'Expect:' "${JPEG[@]}" \
+    --data-binary @"$IMG" "$BASE/localize")
+  # curl sends in bursts a second apart and reads the answer after a burst;
+  # the server's log says when it answered.
+  latency=$(grep -o 'status=408 latency_ms=[0-9.]*' "$TMP/deadline.log" | head -1 | cut -d= -f3)
+  cut_off() {
+    test "${1%% *}" = 408 && grep -q '"code":"request_timeout"' "$B" \
+      && awk -v t="${latency:-9999}" 'BEGIN { exit !(t >= 30 && t < 500) }'
+  }
+  check "a body still arriving at the deadline → 408 request_timeout after ${latency:-?} ms (curl: $answer s; the upload takes 3.5 s)" \
+    cut_off "$answer"
+  results=()
+  for i in 1 2 3 4 5 6; do
+    status=$(req "$B" "${JPEG[@]}" --data-binary @"$BIG" "$BASE/localize?rule=none&tiles=1x1")
+    results+=("$status/$(jq -r '.error.code // (.stop.kind + "/used=" + (.features.used | tostring))' "$B")")
+  done
+  answered=$(printf '%s\n' "${results[@]}" | grep -c '^200/')
+  bad=$(printf '%s\n' "${results[@]}" | grep -vcE '^503/deadline_exceeded$|^200/(rule|exhausted|deadline)/used=[1-9]')
+  exceeded=$(printf '%s\n' "${results[@]}" | grep -c '^503/deadline_exceeded$')
+  check "past the deadline before any vote: 503 deadline_exceeded, never 200 with 0 features (${results[*]})" \
+    test "$bad" = 0 -a "$exceeded" -ge 1
+  check "only answered searches enter the features-used histogram (+$(($(metric "$ratio_count") - before)), answered $answered)" \
+    test "$(metric "$ratio_count")" = "$((before + answered))"
+  check "deadline refusals are counted as rejections" \
+    test "$(metric 'bowloc_rejected_requests_total{reason="deadline_exceeded"}')" = "$exceeded"
+  kill -TERM "$PID"; wait "$PID"
+else
+  fail "server with a 30 ms deadline starts"
+fi
+
+# --- bootstrap: only the default files, its progress on /readyz ----------------
+# In an empty folder the default files (data/default/…) are missing; bootstrap
+# builds them from rtabmap-loop with 200 words. A mistyped --map is never
+# built: serve exits naming it.
+mkdir -p "$TMP/boot"
+cat >"$TMP/boot/config.toml" <<TOML
+[server]
+listen = "127.0.0.1:0"
+workers = 1
+[bootstrap]
+dataset = "$RTAB"
+words = 200
+TOML
+cd "$TMP/boot" || exit 1
+startup_fails "--map naming a missing file (bootstrap on)" "a/typo.bowmap are missing (bootstrap builds only the default files" \
+  config.toml -- --map a/typo.bowmap
+check "the mistyped map was not built" test ! -e "$TMP/boot/a"
+cd "$ROOT" || exit 1
+if launch config.toml "$TMP/boot.log" "$TMP/boot"; then
+  steps=()
+  last=""
+  ready=no
+  for i in $(seq 1 1200); do
+    status=$(req "$B" "$BASE/readyz")
+    [ "$status" = 200 ] && { ready=yes; break; }
+    step=$(jq -r '.error.step // empty' "$B" 2>/dev/null)
+    [ -n "$step" ] && [ "$step" != "${last:-}" ] && { steps+=("$step"); last=$step; }
+    kill -0 "$PID" 2>/dev/null || break
+    sleep 0.05
+  done
+  printf '      /readyz step: %s\n' "${steps[@]}"
+  seen=$(printf '%s\n' "${steps[@]}")
+  reported() {
+    test "$ready" = yes && grep -q 'extracting the features of 40 images' <<<"$seen" \
+      && grep -qE '^(k-means\+\+ seeding|Lloyd iterations) [0-9]+/[0-9]+$' <<<"$seen"
+  }
+  check "bootstrap reports its steps on /readyz, then is ready (${#steps[@]} steps seen)" reported
+  check "bootstrap built the default files" test -f "$TMP/boot/data/default/vocab.bowvoc" -a -f "$TMP/boot/data/default/map.bowmap"
+  kill -TERM "$PID"; wait "$PID"
+else
+  fail "bootstrap server starts"
+fi
 
 # --- the container's runtime libraries ---------------------------------------
 if command -v dpkg >/dev/null && command -v ldd >/dev/null; then
