@@ -1,6 +1,7 @@
 //! `bowloc map build`: index a set of images against a vocabulary.
 
 use bowloc::dataset::image_list;
+use bowloc::geometry::packed::PACKED_BYTES;
 use bowloc::index::Places;
 use bowloc::pipeline::build_map;
 use bowloc::vocabulary::Vocabulary;
@@ -49,11 +50,17 @@ pub fn run(command: MapCommand) -> anyhow::Result<()> {
     let map = build_map(&vocab, &images, places.as_ref(), &name, a.strict)?;
     map.save(&a.out)?;
     let m = map.meta();
+    let bytes = std::fs::metadata(&a.out).map_or(0, |f| f.len());
+    // the two geometry sections: packed features and per-image offsets
+    let geometry_bytes = m.features as usize * PACKED_BYTES + (m.images + 1) * 8;
     tracing::info!(
         path = %a.out.display(),
         images = m.images,
         postings = m.postings,
+        features = m.features,
         without_features = m.images_without_features,
+        bytes,
+        geometry_bytes,
         "map written"
     );
     Ok(())

@@ -17,7 +17,13 @@ impl QueryFeatures {
     pub fn new(features: &[(u32, Keypoint)]) -> Self {
         let mut sorted: Vec<(u32, [f32; 2])> =
             features.iter().map(|(w, k)| (*w, [k.x, k.y])).collect();
-        sorted.sort_by_key(|f| f.0);
+        // by word, then position: the pairs, hence the fit, do not depend on
+        // the order the features came in
+        sorted.sort_by(|a, b| {
+            (a.0, a.1[0], a.1[1])
+                .partial_cmp(&(b.0, b.1[0], b.1[1]))
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
         Self { sorted }
     }
 
@@ -133,6 +139,23 @@ mod tests {
         assert_eq!(tentative(&query, &m, 6).len(), 8);
         assert!(tentative(&query, &[], 4).is_empty());
         assert!(tentative(&QueryFeatures::default(), &m, 4).is_empty());
+    }
+
+    #[test]
+    fn pairs_do_not_depend_on_the_order_of_the_query_features() {
+        let features = [
+            (2, kp(9.0, 1.0)),
+            (2, kp(3.0, 4.0)),
+            (1, kp(5.0, 5.0)),
+            (2, kp(3.0, 2.0)),
+        ];
+        let mut reversed = features;
+        reversed.reverse();
+        let m = map(&[(1, 1.0, 1.0), (2, 2.0, 2.0)]);
+        assert_eq!(
+            tentative(&QueryFeatures::new(&features), &m, 4),
+            tentative(&QueryFeatures::new(&reversed), &m, 4)
+        );
     }
 
     #[test]
