@@ -519,6 +519,17 @@ mod tests {
     }
 
     #[test]
+    fn shipped_file_names_every_rule_and_parameter() {
+        let text = std::fs::read_to_string(shipped()).unwrap();
+        for rule in crate::search::stop::RULES {
+            assert!(text.contains(rule.name), "config/default.toml: rule {}", rule.name);
+        }
+        for name in crate::search::stop::parameter_names() {
+            assert!(text.contains(name), "config/default.toml: parameter {name}");
+        }
+    }
+
+    #[test]
     fn environment_overrides_the_file() {
         let c = load_str(
             "[search]\ntop_n = 3\n",
