@@ -47,10 +47,10 @@ pub struct LocalizeParams {
     /// Inliers m of rule verified, a whole number in 4..=1000.
     #[param(value_type = Option<u32>, minimum = 4, maximum = 1000)]
     pub inliers: Option<String>,
-    /// Seed of the feature permutation (0 to 2^64−1). Without it each request
-    /// draws its own, below 2^53 so that it survives a JSON number; the
-    /// answer reports the seed used.
-    #[param(value_type = Option<u64>)]
+    /// Seed of the feature permutation (0 to 2^63−1, the API document's
+    /// int64). Without it each request draws its own, below 2^53 so that it
+    /// survives a JSON number; the answer reports the seed used.
+    #[param(value_type = Option<i64>, minimum = 0)]
     pub seed: Option<String>,
     /// Drop candidates scoring below this (≥ 0).
     #[param(value_type = Option<f32>)]
@@ -112,12 +112,17 @@ impl LocalizeParams {
             o.top_n = n;
         }
         o.seed = match &self.seed {
-            Some(v) => v.trim().parse().map_err(|_| {
-                ApiError::invalid_parameter(
-                    "seed",
-                    format!("`{v}` is not a whole number in 0..={}", u64::MAX),
-                )
-            })?,
+            Some(v) => v
+                .trim()
+                .parse::<u64>()
+                .ok()
+                .filter(|&s| s <= i64::MAX as u64)
+                .ok_or_else(|| {
+                    ApiError::invalid_parameter(
+                        "seed",
+                        format!("`{v}` is not a whole number in 0..={}", i64::MAX),
+                    )
+                })?,
             None => crate::report::draw_seed(),
         };
         if let Some(v) = &self.min_score {
@@ -526,7 +531,7 @@ mod tests {
         );
         assert_eq!(parse("threshold=2").unwrap().rule.parameter, 2.0);
         assert_eq!(parse("rule=none").unwrap().rule.name, "none");
-        assert_eq!(parse(&format!("seed={}", u64::MAX)).unwrap().seed, u64::MAX);
+        assert_eq!(parse(&format!("seed={}", i64::MAX)).unwrap().seed, i64::MAX as u64);
     }
 
     #[test]
@@ -549,6 +554,7 @@ mod tests {
             ("seed=abc", "invalid_parameter", "seed"),
             ("seed=-3", "invalid_parameter", "seed"),
             ("seed=1.5", "invalid_parameter", "seed"),
+            ("seed=9223372036854775808", "invalid_parameter", "seed"),
             ("min_score=-0.1", "invalid_parameter", "min_score"),
             ("rule=relative", "invalid_parameter", "needs a threshold"),
             (

@@ -539,9 +539,11 @@ if start_server "$TMP/conn.toml" "$TMP/conn.log"; then
     { [ -n "$seed" ] && [ "${#seed}" -le 16 ] && [ "$seed" -le 9007199254740991 ]; } || safe=no
   done
   check "drawn seeds are below 2^53 (${seeds[*]})" test "$safe" = yes
-  status=$(req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?seed=18446744073709551615")
-  given_seed() { test "$status" = 200 && grep -q '"seed":18446744073709551615' "$B"; }
-  check "seed 2^64-1 is taken and reported as given" given_seed
+  status=$(req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?seed=9223372036854775807")
+  given_seed() { test "$status" = 200 && grep -q '"seed":9223372036854775807' "$B"; }
+  check "seed 2^63-1 (the API's int64 maximum) is taken and reported as given" given_seed
+  status=$(req "$B" "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?seed=9223372036854775808")
+  check "seed 2^63 is 400 invalid_parameter" test "$status/$(jq -r .error.code "$B")" = "400/invalid_parameter"
 
   # server.drain_ms = 1000: SIGTERM during an upload that sends 10 bytes
   # every 0.2 s (never pausing for the 1 s body timeout) for 4 s; the
