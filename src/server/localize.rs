@@ -95,9 +95,12 @@ impl LocalizeParams {
             o.min_features = 0;
         }
         if let Some(v) = &self.min_features {
-            o.min_features = v.trim().parse().map_err(|_| {
-                ApiError::invalid_parameter("min_features", format!("`{v}` is not a whole number"))
-            })?;
+            o.min_features = v.trim().parse::<u32>().map_err(|_| {
+                ApiError::invalid_parameter(
+                    "min_features",
+                    format!("`{v}` is not a whole number in 0..={}", u32::MAX),
+                )
+            })? as usize;
         }
         if let Some(v) = &self.top_n {
             let n: usize = v.trim().parse().map_err(|_| {
@@ -127,10 +130,10 @@ impl LocalizeParams {
         };
         if let Some(v) = &self.min_score {
             let s = number("min_score", v)?;
-            if s < 0.0 {
+            if !(0.0..=f32::MAX as f64).contains(&s) {
                 return Err(ApiError::invalid_parameter(
                     "min_score",
-                    format!("must be ≥ 0, got {s}"),
+                    format!("must be a number in 0..={}, got {s}", f32::MAX),
                 ));
             }
             o.min_score = s as f32;
@@ -556,6 +559,8 @@ mod tests {
             ("seed=1.5", "invalid_parameter", "seed"),
             ("seed=9223372036854775808", "invalid_parameter", "seed"),
             ("min_score=-0.1", "invalid_parameter", "min_score"),
+            ("min_score=1e39", "invalid_parameter", "min_score"),
+            ("min_features=4294967296", "invalid_parameter", "min_features"),
             ("rule=relative", "invalid_parameter", "needs a threshold"),
             (
                 "rule=none&threshold=1",
