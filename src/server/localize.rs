@@ -95,12 +95,18 @@ impl LocalizeParams {
             o.min_features = 0;
         }
         if let Some(v) = &self.min_features {
-            o.min_features = v.trim().parse::<u32>().map_err(|_| {
-                ApiError::invalid_parameter(
-                    "min_features",
-                    format!("`{v}` is not a whole number in 0..={}", u32::MAX),
-                )
-            })? as usize;
+            // the API document's int32
+            o.min_features = v
+                .trim()
+                .parse::<u32>()
+                .ok()
+                .filter(|&n| n <= i32::MAX as u32)
+                .ok_or_else(|| {
+                    ApiError::invalid_parameter(
+                        "min_features",
+                        format!("`{v}` is not a whole number in 0..={}", i32::MAX),
+                    )
+                })? as usize;
         }
         if let Some(v) = &self.top_n {
             let n: usize = v.trim().parse().map_err(|_| {
@@ -560,7 +566,7 @@ mod tests {
             ("seed=9223372036854775808", "invalid_parameter", "seed"),
             ("min_score=-0.1", "invalid_parameter", "min_score"),
             ("min_score=1e39", "invalid_parameter", "min_score"),
-            ("min_features=4294967296", "invalid_parameter", "min_features"),
+            ("min_features=2147483648", "invalid_parameter", "min_features"),
             ("rule=relative", "invalid_parameter", "needs a threshold"),
             (
                 "rule=none&threshold=1",
