@@ -128,8 +128,9 @@ fn missing(config: &Config) -> String {
 /// moved aside as `<name>.old`, so bootstrap builds it again: the default
 /// files are bootstrap's own. A user's map is never touched.
 fn retire_old_default_map(map: &std::path::Path) {
-    if let Err(crate::store::StoreError::WrongVersion { found, expected, .. }) =
-        crate::index::MapIndex::open(map, false)
+    if let Err(crate::store::StoreError::WrongVersion {
+        found, expected, ..
+    }) = crate::index::MapIndex::open(map, false)
     {
         let old = map.with_extension("bowmap.old");
         tracing::warn!(

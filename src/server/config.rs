@@ -522,7 +522,11 @@ mod tests {
     fn shipped_file_names_every_rule_and_parameter() {
         let text = std::fs::read_to_string(shipped()).unwrap();
         for rule in crate::search::stop::RULES {
-            assert!(text.contains(rule.name), "config/default.toml: rule {}", rule.name);
+            assert!(
+                text.contains(rule.name),
+                "config/default.toml: rule {}",
+                rule.name
+            );
         }
         for name in crate::search::stop::parameter_names() {
             assert!(text.contains(name), "config/default.toml: parameter {name}");

@@ -96,17 +96,7 @@ impl LocalizeParams {
         }
         if let Some(v) = &self.min_features {
             // the API document's int32
-            o.min_features = v
-                .trim()
-                .parse::<u32>()
-                .ok()
-                .filter(|&n| n <= i32::MAX as u32)
-                .ok_or_else(|| {
-                    ApiError::invalid_parameter(
-                        "min_features",
-                        format!("`{v}` is not a whole number in 0..={}", i32::MAX),
-                    )
-                })? as usize;
+            o.min_features = whole("min_features", v, i32::MAX as u64)? as usize;
         }
         if let Some(v) = &self.top_n {
             let n: usize = v.trim().parse().map_err(|_| {
@@ -121,17 +111,8 @@ impl LocalizeParams {
             o.top_n = n;
         }
         o.seed = match &self.seed {
-            Some(v) => v
-                .trim()
-                .parse::<u64>()
-                .ok()
-                .filter(|&s| s <= i64::MAX as u64)
-                .ok_or_else(|| {
-                    ApiError::invalid_parameter(
-                        "seed",
-                        format!("`{v}` is not a whole number in 0..={}", i64::MAX),
-                    )
-                })?,
+            // the API document's int64
+            Some(v) => whole("seed", v, i64::MAX as u64)?,
             None => crate::report::draw_seed(),
         };
         if let Some(v) = &self.min_score {
@@ -193,6 +174,17 @@ impl LocalizeParams {
             Some(p) => ApiError::invalid_parameter(&p, e.message),
         })
     }
+}
+
+/// A whole number in `0..=max`.
+fn whole(name: &str, v: &str, max: u64) -> Result<u64, ApiError> {
+    v.trim()
+        .parse::<u64>()
+        .ok()
+        .filter(|&n| n <= max)
+        .ok_or_else(|| {
+            ApiError::invalid_parameter(name, format!("`{v}` is not a whole number in 0..={max}"))
+        })
 }
 
 /// A finite number.
@@ -540,7 +532,10 @@ mod tests {
         );
         assert_eq!(parse("threshold=2").unwrap().rule.parameter, 2.0);
         assert_eq!(parse("rule=none").unwrap().rule.name, "none");
-        assert_eq!(parse(&format!("seed={}", i64::MAX)).unwrap().seed, i64::MAX as u64);
+        assert_eq!(
+            parse(&format!("seed={}", i64::MAX)).unwrap().seed,
+            i64::MAX as u64
+        );
     }
 
     #[test]
@@ -566,7 +561,11 @@ mod tests {
             ("seed=9223372036854775808", "invalid_parameter", "seed"),
             ("min_score=-0.1", "invalid_parameter", "min_score"),
             ("min_score=1e39", "invalid_parameter", "min_score"),
-            ("min_features=2147483648", "invalid_parameter", "min_features"),
+            (
+                "min_features=2147483648",
+                "invalid_parameter",
+                "min_features",
+            ),
             ("rule=relative", "invalid_parameter", "needs a threshold"),
             (
                 "rule=none&threshold=1",

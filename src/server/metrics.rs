@@ -60,7 +60,9 @@ pub fn install() -> PrometheusHandle {
             let handle = PrometheusBuilder::new()
                 .set_buckets_for_metric(Matcher::Suffix("_seconds".into()), &latency)
                 .and_then(|b| b.set_buckets_for_metric(Matcher::Full(RATIO_USED.into()), &fraction))
-                .and_then(|b| b.set_buckets_for_metric(Matcher::Full(TILES_RATIO.into()), &fraction))
+                .and_then(|b| {
+                    b.set_buckets_for_metric(Matcher::Full(TILES_RATIO.into()), &fraction)
+                })
                 .and_then(|b| {
                     b.set_buckets_for_metric(Matcher::Full(QUERY_FEATURES.into()), &features)
                 })
