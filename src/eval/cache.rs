@@ -416,7 +416,7 @@ mod tests {
         // image 1 as a query: one tile of 0.5 ms, the rest fixed cost
         let q = set.query(1, vec![7, 8]);
         assert_eq!(
-            (q.tiles.len(), q.fixed_ms, q.full_extract_ms()),
+            (q.tiles.len(), q.fixed_ms, q.fixed_ms + q.tiles[0].ms),
             (1, 5.5, 6.0)
         );
         assert_eq!(set.owned_per_image().len(), 2);

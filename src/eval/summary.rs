@@ -197,16 +197,21 @@ impl SettingSummary {
     }
 }
 
-/// The metrics of one run's answers.
-pub fn run_metrics(outcomes: &[Outcome], truth: &[HashSet<u32>]) -> RunMetrics {
-    let answers: Vec<Answer<'_>> = outcomes
+/// One run's outcomes as the metrics take them, query by query with its truth.
+pub fn answers<'a>(outcomes: &'a [Outcome], truth: &'a [HashSet<u32>]) -> Vec<Answer<'a>> {
+    outcomes
         .iter()
         .zip(truth)
         .map(|(o, t)| Answer {
             candidates: &o.candidates,
             truth: t,
         })
-        .collect();
+        .collect()
+}
+
+/// The metrics of one run's answers.
+pub fn run_metrics(outcomes: &[Outcome], truth: &[HashSet<u32>]) -> RunMetrics {
+    let answers = answers(outcomes, truth);
     let at = TOP_N.map(|n| metrics::recall_at_precision(&answers, n, PRECISION));
     let fractions: Vec<f64> = outcomes.iter().map(Outcome::fraction).collect();
     RunMetrics {

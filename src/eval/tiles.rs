@@ -69,11 +69,6 @@ impl Query {
         }
     }
 
-    /// Extraction time of the whole image (every tile).
-    pub fn full_extract_ms(&self) -> f64 {
-        self.fixed_ms as f64 + self.tiles.iter().map(|t| t.ms as f64).sum::<f64>()
-    }
-
     /// Search as the service does with streaming extraction: tiles in the
     /// order drawn from the options' seed, each tile's words fed in a random
     /// order, no tile extracted after the search stops; with `verify`, the
@@ -194,7 +189,6 @@ mod tests {
             fixed_ms: 2.0,
             ..Query::default()
         };
-        assert_eq!(q.full_extract_ms(), 22.0);
         let none = SearchOptions::default();
         let r = q.search(&map, &none, false);
         assert_eq!(

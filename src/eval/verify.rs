@@ -4,7 +4,7 @@
 //! and the recalls with and without it side by side, with what verification
 //! cost per query.
 
-use super::metrics::{self, Answer};
+use super::metrics;
 use super::summary::PRECISION;
 use super::summary::Stat;
 use super::sweep::Outcome;
@@ -52,14 +52,7 @@ fn recalls(runs: &[Vec<Outcome>], truth: &[HashSet<u32>]) -> Recalls {
     let per_run: Vec<[f64; 4]> = runs
         .iter()
         .map(|r| {
-            let answers: Vec<Answer<'_>> = r
-                .iter()
-                .zip(truth)
-                .map(|(o, t)| Answer {
-                    candidates: &o.candidates,
-                    truth: t,
-                })
-                .collect();
+            let answers = super::summary::answers(r, truth);
             [
                 metrics::recall_at(&answers, 1),
                 metrics::recall_at(&answers, 5),

@@ -322,22 +322,11 @@ pub fn search(
     descriptors: ArrayView2<'_, f32>,
     options: &SearchOptions,
 ) -> SearchOutcome {
-    let mut s = Search::new(map, options);
-    s.set_total(descriptors.nrows());
-    feed_descriptors(&mut s, quantizer, descriptors);
-    s.finish()
-}
-
-/// Feed one batch of descriptors, quantized block by block with `quantizer`.
-/// Returns whether the search has stopped.
-pub fn feed_descriptors(
-    search: &mut Search<'_>,
-    quantizer: &dyn Quantizer,
-    descriptors: ArrayView2<'_, f32>,
-) -> bool {
-    search.feed(
+    search_with(
+        map,
         descriptors.nrows(),
-        descriptor_quantizer(quantizer, descriptors, search.options.block),
+        options,
+        descriptor_quantizer(quantizer, descriptors, options.block),
     )
 }
 
