@@ -29,10 +29,14 @@ fn manifests_validate_and_their_configuration_loads() {
         let path = entry.unwrap().path();
         let config = Config::load(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         assert!(config.files.map.starts_with("/maps"), "{}", path.display());
-        assert!(config.files.vocabulary.starts_with("/maps"), "{}", path.display());
+        assert!(
+            config.files.vocabulary.starts_with("/maps"),
+            "{}",
+            path.display()
+        );
         assert!(!config.bootstrap.enabled, "{}", path.display());
         configs += 1;
     }
-    // the base and its two overlays
-    assert_eq!(configs, 3, "{stdout}");
+    // the base and its three overlays
+    assert_eq!(configs, 4, "{stdout}");
 }

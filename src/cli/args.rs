@@ -262,3 +262,13 @@ pub fn vocab_seeds(given: &[u64]) -> Vec<u64> {
         }),
     }
 }
+
+/// A dataset folder's name (the last component of its canonical path), for
+/// default output and cache folders.
+pub fn dataset_name(dataset: &std::path::Path) -> String {
+    dataset
+        .canonicalize()
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "dataset".into())
+}

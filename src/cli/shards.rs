@@ -2,7 +2,7 @@
 //! each vocabulary seed, setting and shard count, whether the shards gave one
 //! machine's answers and the messages per query; fails when any answer differs.
 
-use super::args::{ExtractArgs, vocab_seeds};
+use super::args::{ExtractArgs, dataset_name, vocab_seeds};
 use bowloc::eval::shards::{self, ShardsConfig};
 use bowloc::features::TileGrid;
 use clap::Args;
@@ -46,12 +46,7 @@ pub struct ShardsArgs {
 }
 
 pub fn run(a: ShardsArgs) -> anyhow::Result<()> {
-    let name = a
-        .dataset
-        .canonicalize()
-        .ok()
-        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .unwrap_or_else(|| "dataset".into());
+    let name = dataset_name(&a.dataset);
     let config = ShardsConfig {
         words: a.words,
         seeds: vocab_seeds(&a.vocab_seeds),
@@ -74,6 +69,9 @@ pub fn run(a: ShardsArgs) -> anyhow::Result<()> {
     let differ: usize = rows.iter().map(|r| r.searches - r.identical).sum();
     let searches: usize = rows.iter().map(|r| r.searches).sum();
     println!("{name}: {differ} of {searches} sharded searches differ from one machine's");
-    anyhow::ensure!(differ == 0, "{differ} sharded answers differ from one machine's");
+    anyhow::ensure!(
+        differ == 0,
+        "{differ} sharded answers differ from one machine's"
+    );
     Ok(())
 }

@@ -188,7 +188,11 @@ fn compare(
             let t = s.traffic;
             (
                 identical,
-                one.features_used as f64 / query.words.len().max(1) as f64,
+                if query.words.is_empty() {
+                    1.0
+                } else {
+                    one.features_used as f64 / query.words.len() as f64
+                },
                 t.rounds,
                 t.messages,
                 t.bytes,
@@ -215,26 +219,43 @@ fn compare(
     }
 }
 
-/// The rows as a Markdown table.
+/// The rows as a Markdown table, one line per setting and shard count:
+/// sums over the vocabulary seeds for the searches, means over the seeds
+/// for the rest, with the messages' range over seeds.
 pub fn markdown(rows: &[ShardRow]) -> String {
     let mut out = String::from(
-        "| seed | setting | shards | identical / searches | features used | round trips | messages | KiB | messages, a round trip per feature | largest shard's postings |\n\
-         | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        "| setting | shards | identical / searches | features used | round trips | messages (range over seeds) | KiB | messages, a round trip per feature | largest shard's postings |\n\
+         | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
+    let mut keys: Vec<(&str, usize)> = Vec::new();
     for r in rows {
+        if !keys.contains(&(r.setting.as_str(), r.shards)) {
+            keys.push((r.setting.as_str(), r.shards));
+        }
+    }
+    keys.sort_by_key(|k| k.1);
+    for (setting, shards) in keys {
+        let group: Vec<&ShardRow> = rows
+            .iter()
+            .filter(|r| r.setting == setting && r.shards == shards)
+            .collect();
+        let n = group.len() as f64;
+        let mean = |f: fn(&ShardRow) -> f64| group.iter().map(|r| f(r)).sum::<f64>() / n;
+        let lo = group
+            .iter()
+            .map(|r| r.messages)
+            .fold(f64::INFINITY, f64::min);
+        let hi = group.iter().map(|r| r.messages).fold(0.0, f64::max);
         out += &format!(
-            "| {} | {} | {} | {} / {} | {:.1} % | {:.1} | {:.1} | {:.1} | {:.0} | {:.1} % |\n",
-            r.seed,
-            r.setting,
-            r.shards,
-            r.identical,
-            r.searches,
-            100.0 * r.fraction,
-            r.rounds,
-            r.messages,
-            r.kib,
-            r.per_feature_messages,
-            100.0 * r.largest_shard
+            "| {setting} | {shards} | {} / {} | {:.1} % | {:.1} | {:.1} ({lo:.1}–{hi:.1}) | {:.1} | {:.0} | {:.1} % |\n",
+            group.iter().map(|r| r.identical).sum::<usize>(),
+            group.iter().map(|r| r.searches).sum::<usize>(),
+            100.0 * mean(|r| r.fraction),
+            mean(|r| r.rounds),
+            mean(|r| r.messages),
+            mean(|r| r.kib),
+            mean(|r| r.per_feature_messages),
+            100.0 * mean(|r| r.largest_shard),
         );
     }
     out

@@ -364,7 +364,11 @@ pub fn search_tiles(
                         .collect(),
                 );
             }
-            traffic.bytes += reports.iter().flatten().map(|r| r.bytes(needs)).sum::<usize>();
+            traffic.bytes += reports
+                .iter()
+                .flatten()
+                .map(|r| r.bytes(needs))
+                .sum::<usize>();
             // the coordinator replays the rule on the merged statistics
             for feature in &reports {
                 merged.tally.features += 1;
@@ -381,7 +385,8 @@ pub fn search_tiles(
     }
     let used = merged.tally.features;
     traffic.per_feature_messages = 2 * shards * used;
-    let (kind, detail) = stop.unwrap_or_else(|| (StopKind::Exhausted, "all features used".to_owned()));
+    let (kind, detail) =
+        stop.unwrap_or_else(|| (StopKind::Exhausted, "all features used".to_owned()));
     ShardedOutcome {
         outcome: SearchOutcome {
             candidates: merged.top_n(options.top_n, options.min_score),
@@ -464,6 +469,9 @@ mod tests {
                 }
             }
         }
-        assert!(stopped_early > 100, "the rules stop early in {stopped_early} searches");
+        assert!(
+            stopped_early > 100,
+            "the rules stop early in {stopped_early} searches"
+        );
     }
 }
