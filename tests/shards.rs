@@ -21,13 +21,20 @@ fn sharded_search_answers_as_one_machine_on_real_images() {
         .expect("bowloc runs");
     let stdout = String::from_utf8_lossy(&output.stdout);
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "bowloc shards failed:\n{stdout}\n{stderr}");
+    assert!(
+        output.status.success(),
+        "bowloc shards failed:\n{stdout}\n{stderr}"
+    );
     // 44 queries × 9 settings × 2 shard counts
     assert!(
         stdout.contains("rtabmap-loop: 0 of 792 sharded searches differ"),
         "{stdout}"
     );
-    for setting in ["| none | 2 |", "| lossless | 8 |", "| relative 2.5 w=100 | 8 |"] {
+    for setting in [
+        "| none | 2 |",
+        "| lossless | 8 |",
+        "| relative 2.5 w=100 | 8 |",
+    ] {
         assert!(stdout.contains(setting), "{setting} missing:\n{stdout}");
     }
 }
