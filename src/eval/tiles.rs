@@ -72,44 +72,55 @@ impl Query {
         }
     }
 
+    /// The tiles in the order the service extracts them for `seed`: their
+    /// numbers in grid order, and each one's features as a span of
+    /// [`words`](Self::words) with the share of the image it covers. A query
+    /// without tiles is one tile, the whole image.
+    pub fn tile_order(&self, seed: u64) -> (Vec<usize>, Vec<(usize, usize, f64)>) {
+        if self.tiles.is_empty() {
+            return (vec![0], vec![(0, self.words.len(), 1.0)]);
+        }
+        let mut starts = Vec::with_capacity(self.tiles.len() + 1);
+        starts.push(0usize);
+        for t in &self.tiles {
+            starts.push(starts.last().unwrap() + t.features as usize);
+        }
+        let order: Vec<usize> = if self.tiles.len() == 1 {
+            vec![0]
+        } else {
+            permute::tile_order(self.tiles.len(), self.coarse_first, seed)
+                .into_iter()
+                .map(|t| t as usize)
+                .collect()
+        };
+        let spans = order
+            .iter()
+            .map(|&t| (starts[t], starts[t + 1], self.tiles[t].area as f64))
+            .collect();
+        (order, spans)
+    }
+
+    /// The words of each span of [`tile_order`](Self::tile_order), with its share of the image.
+    pub fn batches(&self, spans: &[(usize, usize, f64)]) -> Vec<(&[u32], f64)> {
+        spans
+            .iter()
+            .map(|&(a, b, area)| (&self.words[a..b], area))
+            .collect()
+    }
+
     /// Search as the service does with streaming extraction: tiles in the
     /// order drawn from the options' seed, each tile's words fed in a random
     /// order, no tile extracted after the search stops; with `verify`, the
     /// candidates re-ranked by geometric verification afterwards. A rule
     /// that verifies its leader (`verified`) does so with [`Query::geometry`].
     pub fn search(&self, map: &MapIndex, options: &SearchOptions, verify: bool) -> Replay {
-        let whole = [Tile {
-            features: self.words.len() as u32,
-            area: 1.0,
-            ms: 0.0,
-        }];
-        let tiles: &[Tile] = if self.tiles.is_empty() {
-            &whole
-        } else {
-            &self.tiles
-        };
-        let mut starts = Vec::with_capacity(tiles.len() + 1);
-        starts.push(0usize);
-        for t in tiles {
-            starts.push(starts.last().unwrap() + t.features as usize);
-        }
-        let order: Vec<usize> = if tiles.len() == 1 {
-            vec![0]
-        } else {
-            permute::tile_order(tiles.len(), self.coarse_first, options.seed)
-                .into_iter()
-                .map(|t| t as usize)
-                .collect()
-        };
-        let batches: Vec<(&[u32], f64)> = order
-            .iter()
-            .map(|&t| (&self.words[starts[t]..starts[t + 1]], tiles[t].area as f64))
-            .collect();
+        let (order, spans) = self.tile_order(options.seed);
+        let batches = self.batches(&spans);
         // keypoints in the order the features are given to the search
         let fed_keypoints: Vec<Keypoint> = if self.keypoints.len() == self.words.len() {
-            order
+            spans
                 .iter()
-                .flat_map(|&t| self.keypoints[starts[t]..starts[t + 1]].iter().copied())
+                .flat_map(|&(a, b, _)| self.keypoints[a..b].iter().copied())
                 .collect()
         } else {
             Vec::new()
@@ -158,7 +169,7 @@ impl Query {
         let extract_ms = self.fixed_ms as f64
             + order[..used]
                 .iter()
-                .map(|&t| tiles[t].ms as f64)
+                .map(|&t| self.tiles.get(t).map_or(0.0, |t| t.ms as f64))
                 .sum::<f64>();
         Replay {
             outcome,
