@@ -6,7 +6,7 @@
 
 use crate::features::TileGrid;
 use crate::index::{ImageInfo, MapIndex};
-use crate::search::{RuleSpec, SearchOutcome, StopInfo};
+use crate::search::{RuleSpec, SearchOutcome, StopInfo, Trace};
 use serde::Serialize;
 use std::collections::HashMap;
 use std::time::Duration;
@@ -47,6 +47,93 @@ pub struct Localization {
     /// least `min_inliers` inliers). Absent without verification.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub verified: Option<bool>,
+    /// With `trace=true` or `trace=full`: the vote race. Absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub trace: Option<RaceTrace>,
+}
+
+/// The vote race: the search's state as the features arrived, sampled
+/// every `every` features (at most 256 points and the stop), for drawing.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct RaceTrace {
+    /// Features between two sampled points (it doubles for long races to
+    /// keep the points bounded).
+    #[schema(minimum = 1)]
+    pub every: u32,
+    /// Sampled points in voting order; the last one is where the search
+    /// ended (`stop.at_feature`).
+    pub points: Vec<RacePoint>,
+    /// Features given to the search after each tile, in extraction order.
+    pub tile_ends: Vec<u32>,
+    /// With `trace=full`: the same features voted to the end, without a
+    /// rule, every tile extracted.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub full: Option<FullRace>,
+}
+
+/// The state of the race after `features` votes.
+#[derive(Debug, Clone, Copy, Serialize, ToSchema)]
+pub struct RacePoint {
+    /// Features voted so far.
+    pub features: u32,
+    /// The leading map image's id (absent before any vote reached one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub leader: Option<u32>,
+    /// The leader's summed votes, max(h).
+    pub leader_votes: f32,
+    /// The highest summed votes of any other image.
+    pub runner_up_votes: f32,
+    /// The mean vote over all map images, mean(h).
+    pub mean_votes: f64,
+    /// The number the rule compares with its threshold (absent for a rule
+    /// without one: `none`, `lossless`, `confident`; `verified` gives the
+    /// leader's inliers at its last check).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub statistic: Option<f64>,
+    /// The threshold the statistic must pass.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub threshold: Option<f64>,
+}
+
+/// The full search over every feature, for comparison with the answer.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct FullRace {
+    /// Features the full search voted (N, unless the deadline cut it).
+    pub features: usize,
+    /// `exhausted`, or `deadline` when the request's deadline cut it short.
+    pub stop: StopInfo,
+    #[schema(minimum = 1)]
+    pub every: u32,
+    pub points: Vec<RacePoint>,
+    /// The full search's best map images by votes (at most `top_n`, before
+    /// any verification).
+    pub candidates: Vec<Candidate>,
+}
+
+impl From<&Trace> for RaceTrace {
+    fn from(t: &Trace) -> Self {
+        Self {
+            every: t.every,
+            points: race_points(t),
+            tile_ends: t.batch_ends.clone(),
+            full: None,
+        }
+    }
+}
+
+fn race_points(t: &Trace) -> Vec<RacePoint> {
+    t.points
+        .iter()
+        .map(|p| RacePoint {
+            features: p.features,
+            leader: p.leader,
+            leader_votes: p.leader_votes,
+            runner_up_votes: p.runner_up_votes,
+            mean_votes: p.mean_votes,
+            statistic: p.statistic.map(|s| s.0),
+            threshold: p.statistic.map(|s| s.1),
+        })
+        .collect()
 }
 
 /// One map image proposed as the query's place.
@@ -198,6 +285,16 @@ impl MapIdentity {
 }
 
 impl Candidate {
+    /// The ranked vote candidates of a search, with their map metadata.
+    fn ranked(map: &MapIndex, outcome: &SearchOutcome) -> Vec<Self> {
+        outcome
+            .candidates
+            .iter()
+            .enumerate()
+            .map(|(i, r)| Self::new(i + 1, r.score, map.image(r.id)))
+            .collect()
+    }
+
     fn new(rank: usize, score: f32, info: ImageInfo<'_>) -> Self {
         Self {
             rank,
@@ -253,12 +350,7 @@ impl Localization {
         edge: EdgeTimings,
         extraction: Extraction,
     ) -> Self {
-        let candidates = outcome
-            .candidates
-            .iter()
-            .enumerate()
-            .map(|(i, r)| Candidate::new(i + 1, r.score, map.image(r.id)))
-            .collect();
+        let candidates = Candidate::ranked(map, &outcome);
         let t = outcome.timings;
         Self {
             candidates,
@@ -282,7 +374,24 @@ impl Localization {
             },
             map: MapIdentity::of(map),
             verified: None,
+            trace: outcome.trace.as_ref().map(RaceTrace::from),
         }
+    }
+
+    /// Add the full search over every feature (traced) to the trace, for
+    /// comparison.
+    pub fn compare_with_full(&mut self, map: &MapIndex, full: SearchOutcome, top_n: usize) {
+        let Some(trace) = &mut self.trace else { return };
+        let Some(t) = &full.trace else { return };
+        let mut candidates = Candidate::ranked(map, &full);
+        candidates.truncate(top_n);
+        trace.full = Some(FullRace {
+            features: full.features_used,
+            every: t.every,
+            points: race_points(t),
+            candidates,
+            stop: full.stop,
+        });
     }
 
     /// Apply geometric verification: `reranked` holds the vote candidates of
