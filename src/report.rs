@@ -65,6 +65,9 @@ pub struct RaceTrace {
     pub points: Vec<RacePoint>,
     /// Features given to the search after each tile, in extraction order.
     pub tile_ends: Vec<u32>,
+    /// Features voted before the rule was first consulted (`min_features`);
+    /// the statistic before it did not count.
+    pub warm_up: u32,
     /// With `trace=full`: the same features voted to the end, without a
     /// rule, every tile extracted.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -116,6 +119,7 @@ impl From<&Trace> for RaceTrace {
             every: t.every,
             points: race_points(t),
             tile_ends: t.batch_ends.clone(),
+            warm_up: t.warm_up,
             full: None,
         }
     }

@@ -78,16 +78,19 @@ async fn wait_for_port(port: u16, what: &str) {
     }
 }
 
-/// GET `path` on the service: (status line, body).
+/// GET `path` on the service: the whole HTTP answer as text.
 async fn get(address: SocketAddr, path: &str) -> String {
-    use tokio::io::{AsyncReadExt, AsyncWriteExt};
-    let mut s = tokio::net::TcpStream::connect(address).await.unwrap();
-    s.write_all(format!("GET {path} HTTP/1.0\r\nHost: x\r\n\r\n").as_bytes())
-        .await
-        .unwrap();
-    let mut out = String::new();
-    s.read_to_string(&mut out).await.unwrap();
-    out
+    let request = format!("GET {path} HTTP/1.0\r\nHost: x\r\n\r\n");
+    tokio::task::spawn_blocking(move || {
+        use std::io::{Read, Write};
+        let mut s = std::net::TcpStream::connect(address).unwrap();
+        s.write_all(request.as_bytes()).unwrap();
+        let mut out = String::new();
+        let _ = s.read_to_string(&mut out);
+        out
+    })
+    .await
+    .unwrap()
 }
 
 async fn wait_until<F, Fut>(what: &str, timeout: Duration, mut check: F)
@@ -108,6 +111,7 @@ async fn js(client: &Client, script: &str) -> serde_json::Value {
 
 async fn screenshot(client: &Client, width: u32, height: u32, name: &str) {
     client.set_window_size(width, height).await.unwrap();
+    js(client, "window.scrollTo(0, 0); return true").await;
     // the charts redraw on resize
     tokio::time::sleep(Duration::from_millis(300)).await;
     let png = client.screenshot().await.unwrap();
@@ -139,7 +143,8 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
         "test end"
     }));
     wait_until("the map to load", Duration::from_secs(60), || async {
-        get(address, "/readyz").await.starts_with("HTTP/1.1 200")
+        let answer = get(address, "/readyz").await;
+        answer.lines().next().is_some_and(|status| status.contains(" 200 "))
     })
     .await;
 
@@ -184,7 +189,10 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
     .await;
 
     // a real query image: rtabmap-loop's query 5 shows the place of map image 4
-    let query = common::dataset("rtabmap-loop").join("images/5.jpg");
+    let query = common::dataset("rtabmap-loop")
+        .join("images/5.jpg")
+        .canonicalize()
+        .unwrap();
     let file = client.find(Locator::Id("file")).await.unwrap();
     file.send_keys(query.to_str().unwrap()).await.unwrap();
     client.find(Locator::Id("seed")).await.unwrap().send_keys("3").await.unwrap();
@@ -252,7 +260,7 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
     client.set_window_size(1280, 1000).await.unwrap();
 
     // a corrupt file: the API's error is shown as a message
-    let corrupt = dir.path().join("corrupt.jpg");
+    let corrupt = dir.path().canonicalize().unwrap().join("corrupt.jpg");
     std::fs::write(&corrupt, b"\xFF\xD8\xFF this is not really a JPEG").unwrap();
     let file = client.find(Locator::Id("file")).await.unwrap();
     file.clear().await.unwrap();

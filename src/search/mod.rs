@@ -186,7 +186,9 @@ impl<'m> Search<'m> {
     /// Record the vote race: a point every `every` features, at most
     /// `max_points` of them (the step doubles when they would be more).
     pub fn trace(mut self, every: u32, max_points: usize) -> Self {
-        self.trace = Some(Trace::new(every, max_points));
+        let mut trace = Trace::new(every, max_points);
+        trace.warm_up = self.options.min_features.min(u32::MAX as usize) as u32;
+        self.trace = Some(trace);
         self
     }
 

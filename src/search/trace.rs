@@ -48,6 +48,8 @@ pub struct Trace {
     pub points: Vec<TracePoint>,
     /// Features given to the search after each batch (tile), in order.
     pub batch_ends: Vec<u32>,
+    /// Features voted before the rule was first consulted (the warm-up).
+    pub warm_up: u32,
     max_points: usize,
 }
 
@@ -60,6 +62,7 @@ impl Trace {
             every: every.max(1),
             points: Vec::with_capacity(max_points + 1),
             batch_ends: Vec::new(),
+            warm_up: 0,
             max_points,
         }
     }

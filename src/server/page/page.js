@@ -261,8 +261,8 @@ function drawCandidates(answer) {
 // A canvas sized to its box, sharp on high-density screens.
 function prepare(canvas, height) {
   const ratio = window.devicePixelRatio || 1;
-  const width = canvas.parentElement.clientWidth || 600;
-  canvas.style.width = `${width}px`;
+  canvas.style.width = "100%";
+  const width = canvas.clientWidth || 600;
   canvas.style.height = `${height}px`;
   canvas.width = Math.round(width * ratio);
   canvas.height = Math.round(height * ratio);
@@ -314,6 +314,7 @@ function line(ctx, points, x, y, value, color, dashed = false) {
 }
 
 function marker(ctx, xPos, top, bottom, color, text, dashed) {
+  const right = ctx.canvas.width / (window.devicePixelRatio || 1);
   ctx.strokeStyle = color;
   ctx.lineWidth = 2;
   ctx.setLineDash(dashed ? [4, 4] : []);
@@ -323,8 +324,20 @@ function marker(ctx, xPos, top, bottom, color, text, dashed) {
   ctx.stroke();
   ctx.setLineDash([]);
   ctx.fillStyle = color;
+  // the label on the side with room for it
+  const room = xPos + 8 + ctx.measureText(text).width < right;
+  ctx.textAlign = room ? "left" : "right";
+  ctx.fillText(text, room ? xPos + 4 : xPos - 4, top + 10);
+}
+
+// The warm-up, before the rule is consulted, shaded.
+function warmUp(ctx, x, pad, height, features) {
+  if (!features) return;
+  ctx.fillStyle = "rgba(107, 114, 128, 0.12)";
+  ctx.fillRect(x(0), pad.top, x(features) - x(0), height - pad.top - pad.bottom);
+  ctx.fillStyle = "#4b5563";
   ctx.textAlign = "left";
-  ctx.fillText(text, xPos + 4, top + 10);
+  ctx.fillText("warm-up", x(0) + 4, height - pad.bottom - 6);
 }
 
 function drawRace(answer) {
@@ -348,6 +361,7 @@ function drawRace(answer) {
   {
     const { ctx, width, height } = prepare(raceCanvas, 260);
     const { x, y, pad } = frame(ctx, width, height, maxX, maxY, "features voted");
+    warmUp(ctx, x, pad, height, Math.min(trace.warm_up, maxX));
     ctx.fillStyle = COLORS.axis;
     ctx.save();
     ctx.translate(12, height / 2);
@@ -382,6 +396,7 @@ function drawRace(answer) {
     const top = Math.max(...stats.map((p) => Math.max(p.statistic, p.threshold)), 1e-9);
     const { x, y, pad } = frame(ctx, width, height, maxX, top * 1.05,
       `${answer.rule.name}: statistic against its ${answer.rule.parameter || "threshold"}`);
+    warmUp(ctx, x, pad, height, Math.min(trace.warm_up, maxX));
     line(ctx, stats, x, y, (p) => p.threshold, COLORS.threshold, true);
     line(ctx, stats, x, y, (p) => p.statistic, COLORS.stat);
     marker(ctx, x(stopAt), pad.top, height - pad.bottom, COLORS.stop, "stop", false);
@@ -395,8 +410,10 @@ function drawRace(answer) {
   const f = answer.features;
   const leaderChanges = trace.points.reduce(
     (n, p, i, a) => n + (i > 0 && p.leader !== a[i - 1].leader ? 1 : 0), 0);
-  let text = `Stopped at feature ${stopAt} of ${f.total}${answer.tiles.extracted < answer.tiles.total ? " (estimated)" : ""}: ` +
-    `${answer.stop.detail}. The leader changed ${leaderChanges} time${leaderChanges === 1 ? "" : "s"} in the sampled points.`;
+  const of = answer.tiles.extracted < answer.tiles.total ? `about ${f.total} (estimated)` : `${f.total}`;
+  let text = `Stopped at feature ${stopAt} of ${of}; ${answer.stop.detail}. ` +
+    (trace.warm_up > 0 ? `The rule was first consulted after ${trace.warm_up} features (warm-up). ` : "") +
+    `The leader changed ${leaderChanges} time${leaderChanges === 1 ? "" : "s"} in the sampled points.`;
   if (full) {
     const a = answer.trace.full.candidates[0];
     text += ` The full search voted all ${full.features} features` +
