@@ -6,10 +6,12 @@ use crate::dataset::ImageRef;
 use crate::features::fit::OpenCvFit;
 use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
 use crate::geometry::Keypoint;
-use crate::geometry::verify::{LeaderVerifier, VerifyParams, rerank, with_keypoints};
+use crate::geometry::verify::{
+    LeaderVerifier, VerifyParams, inlier_matches, rerank, with_keypoints,
+};
 use crate::index::{ImageWords, MapBuilder, MapIndex, Places};
 use crate::quantize::{Quantizer, QuantizerKind};
-use crate::report::{EdgeTimings, Extraction, ImageSize, Localization};
+use crate::report::{CandidateMatches, EdgeTimings, Extraction, ImageSize, Localization};
 use crate::search::{self, Search, SearchOptions};
 use crate::vocabulary::kmeans::{KmeansConfig, kmeans};
 use crate::vocabulary::{Vocabulary, VocabularyMeta};
@@ -407,13 +409,27 @@ impl Localizer {
         let started = Instant::now();
         let votes: Vec<(u32, f32)> = answer.candidates.iter().map(|c| (c.id, c.score)).collect();
         let reranked = rerank(&self.map, &votes, query, &self.fit, &self.verify);
-        answer.verified(
+        let mut answer = answer.verified(
             &self.map,
             &reranked,
             options.top_n,
             options.min_score,
             started.elapsed(),
-        )
+        );
+        // a traced answer shows each candidate's inliers (not timed: the
+        // fits are repeated only to draw them)
+        if let Some(trace) = &mut answer.trace {
+            trace.matches = answer
+                .candidates
+                .iter()
+                .filter(|c| c.inliers.unwrap_or(0) > 0)
+                .map(|c| {
+                    let inliers = inlier_matches(&self.map, c.id, query, &self.fit, &self.verify);
+                    CandidateMatches::new(c.id, &inliers.query, &inliers.map)
+                })
+                .collect();
+        }
+        answer
     }
 
     /// Answer one query image given as encoded bytes: decode, then extract
@@ -546,6 +562,9 @@ impl Localizer {
         );
         if let Some(full) = full {
             answer.compare_with_full(&self.map, full.finish(), options.top_n);
+        }
+        if let Some(trace) = &mut answer.trace {
+            trace.frame_side = self.extract.max_side;
         }
         Ok(if verify {
             self.verify(answer, &query, options)

@@ -72,6 +72,40 @@ pub struct RaceTrace {
     /// rule, every tile extracted.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub full: Option<FullRace>,
+    /// Longer side of the extraction frame: SIFT saw each image (query and
+    /// map) downscaled so its longer side is at most this (0: full size).
+    /// Match positions are in pixels of that frame.
+    pub frame_side: u32,
+    /// With verification: the inliers of each candidate that has some.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub matches: Vec<CandidateMatches>,
+}
+
+/// Most match lines reported per candidate.
+pub const MAX_MATCH_LINES: usize = 100;
+
+/// A verified candidate's inliers as lines between the two images.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct CandidateMatches {
+    /// The map image id.
+    pub id: u32,
+    /// Inlier pairs `[query x, query y, map x, map y]`, in pixels of each
+    /// image's extraction frame (`frame_side`); at most 100, evenly chosen.
+    pub lines: Vec<[f32; 4]>,
+}
+
+impl CandidateMatches {
+    /// The pairs `query[i]` ↔ `map[i]`, thinned evenly to at most
+    /// [`MAX_MATCH_LINES`].
+    pub fn new(id: u32, query: &[[f32; 2]], map: &[[f32; 2]]) -> Self {
+        let n = query.len().min(map.len());
+        let step = n.div_ceil(MAX_MATCH_LINES).max(1);
+        let lines = (0..n)
+            .step_by(step)
+            .map(|i| [query[i][0], query[i][1], map[i][0], map[i][1]])
+            .collect();
+        Self { id, lines }
+    }
 }
 
 /// The state of the race after `features` votes.
@@ -121,6 +155,8 @@ impl From<&Trace> for RaceTrace {
             tile_ends: t.batch_ends.clone(),
             warm_up: t.warm_up,
             full: None,
+            frame_side: 0,
+            matches: Vec::new(),
         }
     }
 }

@@ -2,7 +2,8 @@
 //! through chromedriver (WebDriver, with `fantoccini`) against the service
 //! on a loopback port. It uploads a real query image, waits for the
 //! candidates, checks that the top candidate's thumbnail loaded and that the
-//! vote race was drawn, submits a corrupt file and checks the error
+//! vote race and the verified top candidate's match lines were drawn,
+//! submits a corrupt file and checks the error
 //! message, and saves screenshots at desktop and phone widths in
 //! `target/test-output/browser/`.
 
@@ -196,6 +197,7 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
     let file = client.find(Locator::Id("file")).await.unwrap();
     file.send_keys(query.to_str().unwrap()).await.unwrap();
     client.find(Locator::Id("seed")).await.unwrap().send_keys("3").await.unwrap();
+    client.find(Locator::Id("verify")).await.unwrap().click().await.unwrap();
     client.find(Locator::Id("submit")).await.unwrap().click().await.unwrap();
     wait_until("the candidates", Duration::from_secs(30), || async {
         js(&client, "return document.querySelectorAll('#candidates li.candidate').length")
@@ -245,11 +247,20 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
         .unwrap();
     assert!(summary.contains("Stopped at feature"), "{summary}");
     assert!(summary.contains("full search"), "{summary}");
+    // verified: the top candidate's inliers are drawn as lines
+    wait_until("the match lines", Duration::from_secs(15), || async {
+        js(&client, "return Number(document.getElementById('match-canvas').dataset.lines || 0)")
+            .await
+            .as_u64()
+            .unwrap_or(0)
+            >= 12
+    })
+    .await;
     let error_hidden = js(&client, "return document.getElementById('error').hidden").await;
     assert_eq!(error_hidden, json!(true));
 
-    screenshot(&client, 1280, 1500, "desktop.png").await;
-    screenshot(&client, 390, 2400, "phone.png").await;
+    screenshot(&client, 1280, 1900, "desktop.png").await;
+    screenshot(&client, 390, 3400, "phone.png").await;
     // no horizontal scrolling at phone width
     let overflow = js(
         &client,

@@ -8,7 +8,7 @@ use super::localize::{self, ImageUpload};
 use super::status::{self, MapInfo, Status};
 use super::{page, thumbnails};
 use crate::report::{
-    Candidate, FeatureUse, FullRace, ImageSize, Localization, MapIdentity, RacePoint, RaceTrace,
+    Candidate, CandidateMatches, FeatureUse, FullRace, ImageSize, Localization, MapIdentity, RacePoint, RaceTrace,
     RuleReport, Timings,
 };
 use crate::search::StopInfo;
@@ -41,7 +41,7 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
     components(schemas(
         Localization, Candidate, FeatureUse, RuleReport, StopInfo, ImageSize, Timings,
         MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload, Binary, RaceTrace,
-        RacePoint, FullRace,
+        RacePoint, FullRace, CandidateMatches,
     )),
     tags(
         (name = "localize", description = "Localize a query image against the loaded map."),

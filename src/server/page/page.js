@@ -185,6 +185,9 @@ async function render(answer) {
   $("results").hidden = false;
   await drawQuery(answer);
   drawCandidates(answer);
+  $("match-box").hidden = true;
+  const top = answer.candidates[0];
+  if (top && matchesOf(answer, top.id)) await drawMatches(answer, top);
   drawRace(answer);
   drawTimings(answer);
 }
@@ -254,8 +257,90 @@ function drawCandidates(answer) {
     }
     fig.append(img, cap);
     li.appendChild(fig);
+    if (matchesOf(answer, c.id)) {
+      const b = document.createElement("button");
+      b.type = "button";
+      b.className = "show-matches";
+      b.textContent = "Show matches";
+      b.setAttribute("aria-label", `Show the inlier matches of candidate ${c.rank}`);
+      b.addEventListener("click", () => drawMatches(answer, c));
+      li.appendChild(b);
+    }
     list.appendChild(li);
   }
+}
+
+function matchesOf(answer, id) {
+  const m = answer.trace && answer.trace.matches;
+  return m ? m.find((e) => e.id === id) : undefined;
+}
+
+function loadImage(src) {
+  return new Promise((resolve, reject) => {
+    const img = new Image();
+    img.onload = () => resolve(img);
+    img.onerror = () => reject(new Error(`cannot load ${src}`));
+    img.src = src;
+  });
+}
+
+// The query beside candidate `c`, with a line between the two keypoints of
+// every inlier. Positions are in each image's extraction frame: the image
+// downscaled so its longer side is at most `frame_side`; a map thumbnail of
+// that size is that frame.
+async function drawMatches(answer, c) {
+  const box = $("match-box");
+  const canvas = $("match-canvas");
+  canvas.dataset.lines = "0";
+  const m = matchesOf(answer, c.id);
+  const side = answer.trace.frame_side;
+  if (!m || side < 16 || side > 640) {
+    box.hidden = true;
+    return;
+  }
+  box.hidden = false;
+  $("match-title").textContent =
+    `Inlier matches: query and #${c.rank} ${c.place || c.name} (${c.inliers} inliers; ${m.lines.length} inlier pairs drawn)`;
+  let query;
+  let map;
+  try {
+    [query, map] = await Promise.all([
+      createImageBitmap(queryBlob),
+      loadImage(`/images/${c.id}/thumbnail?size=${side}`),
+    ]);
+  } catch (e) {
+    showError(`Cannot draw the matches: ${e.message}`);
+    return;
+  }
+  const gap = 8;
+  const ratio = window.devicePixelRatio || 1;
+  canvas.style.width = "100%";
+  const width = canvas.clientWidth || 600;
+  const half = (width - gap) / 2;
+  const qs = half / query.width;
+  const ms = half / map.naturalWidth;
+  const height = Math.max(query.height * qs, map.naturalHeight * ms);
+  canvas.style.height = `${height}px`;
+  canvas.width = Math.round(width * ratio);
+  canvas.height = Math.round(height * ratio);
+  const ctx = canvas.getContext("2d");
+  ctx.setTransform(ratio, 0, 0, ratio, 0, 0);
+  ctx.drawImage(query, 0, 0, query.width * qs, query.height * qs);
+  ctx.drawImage(map, half + gap, 0, map.naturalWidth * ms, map.naturalHeight * ms);
+  // query frame → drawn query: the frame is the decoded image scaled by f
+  const w = answer.image.width;
+  const h = answer.image.height;
+  const f = side > 0 ? Math.min(1, side / Math.max(w, h)) : 1;
+  const qx = (x) => (x / f) * (query.width / w) * qs;
+  ctx.lineWidth = 1.5;
+  m.lines.forEach(([x1, y1, x2, y2], i) => {
+    ctx.strokeStyle = `hsl(${(i * 47) % 360}, 85%, 50%)`;
+    ctx.beginPath();
+    ctx.moveTo(qx(x1), qx(y1));
+    ctx.lineTo(half + gap + x2 * ms, y2 * ms);
+    ctx.stroke();
+  });
+  canvas.dataset.lines = String(m.lines.length);
 }
 
 // A canvas sized to its box, sharp on high-density screens.
