@@ -1,6 +1,7 @@
 //! The answer to one query as users see it, shared by `bowloc query` and the
 //! HTTP service: candidates with their map metadata, how many features were
-//! used and why the search stopped, and where the time went. The types also
+//! used and why the search stopped, where the time went and, on request, the
+//! vote race and the inlier matches (the trace). The types also
 //! describe themselves as OpenAPI schemas (utoipa) for the service's API
 //! document.
 

@@ -10,7 +10,8 @@
 //! - [`stop`]: the rule is checked after every vote, so a stop in mid-block
 //!   wastes at most one block of quantization; once it fires, the caller
 //!   extracts no more batches;
-//! - [`rank`]: top-n images with scores comparable across stop points.
+//! - [`rank`]: top-n images with scores comparable across stop points;
+//! - [`trace`]: on request, the vote race as plain data (bounded).
 //!
 //! [`Search`] is the streaming driver; [`search`] and [`search_words`] run it
 //! on one batch whose size is known up front. Pure Rust over plain arrays: no
