@@ -4,7 +4,6 @@
 
 use crate::dataset::ImageRef;
 use crate::features::fit::OpenCvFit;
-use cpu_time::ThreadTime;
 use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
 use crate::geometry::Keypoint;
 use crate::geometry::verify::{
@@ -17,6 +16,7 @@ use crate::search::{self, Search, SearchOptions};
 use crate::vocabulary::kmeans::{KmeansConfig, kmeans};
 use crate::vocabulary::{Vocabulary, VocabularyMeta};
 use anyhow::{Context, bail};
+use cpu_time::ThreadTime;
 use indicatif::{ProgressBar, ProgressStyle};
 use ndarray::{Array2, ArrayView2, Axis};
 use rayon::prelude::*;
