@@ -517,8 +517,11 @@ impl Localizer {
             let took = t.elapsed();
             let last = tiles.extracted() == tiles.total();
             if let Some(full) = &mut full {
-                let quantize =
-                    search::descriptor_quantizer(&*quantizer, tile.descriptors.view(), options.block);
+                let quantize = search::descriptor_quantizer(
+                    &*quantizer,
+                    tile.descriptors.view(),
+                    options.block,
+                );
                 full.feed_tile(tile.len(), tiles.area_extracted(), last, quantize, None);
             }
             if search.stopped() {

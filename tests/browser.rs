@@ -106,6 +106,21 @@ where
     }
 }
 
+/// The element with this id.
+async fn by_id(client: &Client, id: &str) -> fantoccini::elements::Element {
+    client.find(Locator::Id(id)).await.unwrap()
+}
+
+/// The text of the element with this id.
+async fn text(client: &Client, id: &str) -> String {
+    by_id(client, id).await.text().await.unwrap()
+}
+
+/// Click the element with this id.
+async fn click(client: &Client, id: &str) {
+    by_id(client, id).await.click().await.unwrap()
+}
+
 async fn js(client: &Client, script: &str) -> serde_json::Value {
     client.execute(script, vec![]).await.unwrap()
 }
@@ -145,7 +160,10 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
     }));
     wait_until("the map to load", Duration::from_secs(60), || async {
         let answer = get(address, "/readyz").await;
-        answer.lines().next().is_some_and(|status| status.contains(" 200 "))
+        answer
+            .lines()
+            .next()
+            .is_some_and(|status| status.contains(" 200 "))
     })
     .await;
 
@@ -178,13 +196,7 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
     client.goto(&format!("http://{address}/")).await.unwrap();
     // the map line comes from GET /map
     wait_until("the map description", Duration::from_secs(10), || async {
-        let text = client
-            .find(Locator::Id("map-info"))
-            .await
-            .unwrap()
-            .text()
-            .await
-            .unwrap();
+        let text = text(&client, "map-info").await;
         text.contains("20 images")
     })
     .await;
@@ -194,16 +206,19 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
         .join("images/5.jpg")
         .canonicalize()
         .unwrap();
-    let file = client.find(Locator::Id("file")).await.unwrap();
+    let file = by_id(&client, "file").await;
     file.send_keys(query.to_str().unwrap()).await.unwrap();
-    client.find(Locator::Id("seed")).await.unwrap().send_keys("3").await.unwrap();
-    client.find(Locator::Id("verify")).await.unwrap().click().await.unwrap();
-    client.find(Locator::Id("submit")).await.unwrap().click().await.unwrap();
+    by_id(&client, "seed").await.send_keys("3").await.unwrap();
+    click(&client, "verify").await;
+    click(&client, "submit").await;
     wait_until("the candidates", Duration::from_secs(30), || async {
-        js(&client, "return document.querySelectorAll('#candidates li.candidate').length")
-            .await
-            .as_u64()
-            .unwrap_or(0)
+        js(
+            &client,
+            "return document.querySelectorAll('#candidates li.candidate').length",
+        )
+        .await
+        .as_u64()
+        .unwrap_or(0)
             > 0
     })
     .await;
@@ -237,22 +252,22 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
     )
     .await;
     assert_eq!(drawn[0], "true", "{drawn}");
-    assert!(drawn[1].as_u64().unwrap() > 2000, "too little drawn: {drawn}");
-    let summary = client
-        .find(Locator::Id("race-summary"))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    assert!(
+        drawn[1].as_u64().unwrap() > 2000,
+        "too little drawn: {drawn}"
+    );
+    let summary = text(&client, "race-summary").await;
     assert!(summary.contains("Stopped at feature"), "{summary}");
     assert!(summary.contains("full search"), "{summary}");
     // verified: the top candidate's inliers are drawn as lines
     wait_until("the match lines", Duration::from_secs(15), || async {
-        js(&client, "return Number(document.getElementById('match-canvas').dataset.lines || 0)")
-            .await
-            .as_u64()
-            .unwrap_or(0)
+        js(
+            &client,
+            "return Number(document.getElementById('match-canvas').dataset.lines || 0)",
+        )
+        .await
+        .as_u64()
+        .unwrap_or(0)
             >= 12
     })
     .await;
@@ -267,27 +282,24 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
         "return document.documentElement.scrollWidth - document.documentElement.clientWidth",
     )
     .await;
-    assert!(overflow.as_i64().unwrap() <= 0, "page wider than a phone: {overflow}");
+    assert!(
+        overflow.as_i64().unwrap() <= 0,
+        "page wider than a phone: {overflow}"
+    );
     client.set_window_size(1280, 1000).await.unwrap();
 
     // a corrupt file: the API's error is shown as a message
     let corrupt = dir.path().canonicalize().unwrap().join("corrupt.jpg");
     std::fs::write(&corrupt, b"\xFF\xD8\xFF this is not really a JPEG").unwrap();
-    let file = client.find(Locator::Id("file")).await.unwrap();
+    let file = by_id(&client, "file").await;
     file.clear().await.unwrap();
     file.send_keys(corrupt.to_str().unwrap()).await.unwrap();
-    client.find(Locator::Id("submit")).await.unwrap().click().await.unwrap();
+    click(&client, "submit").await;
     wait_until("the error message", Duration::from_secs(15), || async {
         js(&client, "return !document.getElementById('error').hidden").await == json!(true)
     })
     .await;
-    let message = client
-        .find(Locator::Id("error"))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let message = text(&client, "error").await;
     assert!(message.contains("undecodable_image"), "{message}");
     assert!(message.contains("422"), "{message}");
     screenshot(&client, 390, 900, "phone-error.png").await;

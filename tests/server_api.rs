@@ -324,7 +324,10 @@ async fn the_trace_follows_the_race_to_the_stop_and_the_full_search_to_the_end()
     }
     assert!(shared > 0);
     let tile_ends = t["tile_ends"].as_array().unwrap();
-    assert_eq!(tile_ends.len() as u64, traced["tiles"]["extracted"].as_u64().unwrap());
+    assert_eq!(
+        tile_ends.len() as u64,
+        traced["tiles"]["extracted"].as_u64().unwrap()
+    );
     assert!(!full["candidates"].as_array().unwrap().is_empty());
 }
 
@@ -337,19 +340,31 @@ async fn the_protobuf_answer_carries_the_trace() {
     let json: serde_json::Value = serde_json::from_slice(&json).unwrap();
     let (status, _, bytes) = send(&state, localize(q, "application/x-protobuf")).await;
     assert_eq!(status, StatusCode::OK);
-    let t = pb::Localization::decode(bytes.as_slice()).unwrap().trace.unwrap();
+    let t = pb::Localization::decode(bytes.as_slice())
+        .unwrap()
+        .trace
+        .unwrap();
     let j = &json["trace"];
     assert_eq!(t.points.len(), j["points"].as_array().unwrap().len());
     assert_eq!(t.every as u64, j["every"].as_u64().unwrap());
     assert_eq!(t.warm_up as u64, j["warm_up"].as_u64().unwrap());
     assert_eq!(t.frame_side, 640);
     let last = t.points.last().unwrap();
-    assert_eq!(last.features as u64, json["stop"]["at_feature"].as_u64().unwrap());
+    assert_eq!(
+        last.features as u64,
+        json["stop"]["at_feature"].as_u64().unwrap()
+    );
     let full = t.full.unwrap();
     assert_eq!(full.features, j["full"]["features"].as_u64().unwrap());
-    assert_eq!(full.candidates.len(), j["full"]["candidates"].as_array().unwrap().len());
+    assert_eq!(
+        full.candidates.len(),
+        j["full"]["candidates"].as_array().unwrap().len()
+    );
     // verified: the top candidate's inliers as lines, as many as in JSON
     assert!(!t.matches.is_empty());
-    assert_eq!(t.matches[0].lines.len(), j["matches"][0]["lines"].as_array().unwrap().len());
+    assert_eq!(
+        t.matches[0].lines.len(),
+        j["matches"][0]["lines"].as_array().unwrap().len()
+    );
     assert!(t.matches[0].lines.len() >= 4);
 }

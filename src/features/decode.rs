@@ -79,7 +79,11 @@ pub fn decode(bytes: &[u8], limits: DecodeLimits) -> Result<GrayImage, FeatureEr
 }
 
 /// [`probe`], then decode with OpenCV's `imread` `flags` (grayscale, colour).
-pub(super) fn decode_as(bytes: &[u8], limits: DecodeLimits, flags: i32) -> Result<Mat, FeatureError> {
+pub(super) fn decode_as(
+    bytes: &[u8],
+    limits: DecodeLimits,
+    flags: i32,
+) -> Result<Mat, FeatureError> {
     probe(bytes, limits)?;
     let buf = Vector::<u8>::from_slice(bytes);
     let mat = opencv::imgcodecs::imdecode(&buf, flags)

@@ -286,7 +286,11 @@ pub fn inlier_matches(
     fit: &dyn ModelFit,
     params: &VerifyParams,
 ) -> Correspondences {
-    let c = tentative(&QueryFeatures::new(query), map.geometry(image), params.max_word_pairs);
+    let c = tentative(
+        &QueryFeatures::new(query),
+        map.geometry(image),
+        params.max_word_pairs,
+    );
     fit_inliers(&c, fit, params.min_inliers).1
 }
 

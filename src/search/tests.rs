@@ -236,7 +236,13 @@ fn min_features_delays_the_rule() {
 #[test]
 fn traces_record_the_race_without_changing_it() {
     let (map, lists) = random_map(80, 5);
-    let query: Vec<u32> = lists[7].iter().chain(&lists[9]).copied().cycle().take(900).collect();
+    let query: Vec<u32> = lists[7]
+        .iter()
+        .chain(&lists[9])
+        .copied()
+        .cycle()
+        .take(900)
+        .collect();
     let tiles: Vec<&[u32]> = query.chunks(300).collect();
     let mut stopped_early = 0;
     for (rule, p) in [
@@ -277,7 +283,10 @@ fn traces_record_the_race_without_changing_it() {
         assert_eq!(t.batch_ends, vec![300u32, 600, 900][..t.batch_ends.len()]);
         for w in t.points.windows(2) {
             assert!(w[0].features < w[1].features);
-            assert!(w[0].leader_votes <= w[1].leader_votes, "{rule}: votes only grow");
+            assert!(
+                w[0].leader_votes <= w[1].leader_votes,
+                "{rule}: votes only grow"
+            );
         }
         if rule == "none" {
             assert_eq!(traced.stop.kind, StopKind::Exhausted);
@@ -290,11 +299,21 @@ fn traces_record_the_race_without_changing_it() {
             _ => s >= threshold,
         };
         for p in &t.points[..t.points.len() - 1] {
-            assert!(!p.statistic.is_some_and(passed), "{rule}: passed before the stop");
+            assert!(
+                !p.statistic.is_some_and(passed),
+                "{rule}: passed before the stop"
+            );
         }
         let stopped = traced.stop.kind == StopKind::Rule;
-        assert_eq!(last.statistic.is_some_and(passed), stopped, "{rule}: {last:?}");
+        assert_eq!(
+            last.statistic.is_some_and(passed),
+            stopped,
+            "{rule}: {last:?}"
+        );
         stopped_early += usize::from(stopped);
     }
-    assert!(stopped_early >= 3, "only {stopped_early} rules stopped early");
+    assert!(
+        stopped_early >= 3,
+        "only {stopped_early} rules stopped early"
+    );
 }

@@ -8,8 +8,8 @@ use super::localize::{self, ImageUpload};
 use super::status::{self, MapInfo, Status};
 use super::{page, thumbnails};
 use crate::report::{
-    Candidate, CandidateMatches, FeatureUse, FullRace, ImageSize, Localization, MapIdentity, RacePoint, RaceTrace,
-    RuleReport, Timings,
+    Candidate, CandidateMatches, FeatureUse, FullRace, ImageSize, Localization, MapIdentity,
+    RacePoint, RaceTrace, RuleReport, Timings,
 };
 use crate::search::StopInfo;
 use crate::search::stop::{RULES, rule_names};

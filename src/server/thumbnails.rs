@@ -137,7 +137,9 @@ pub async fn thumbnail(
     let size = ThumbnailParams::size(query.as_deref())?;
     let localizer = state.localizer()?;
     let missing = || ApiError::not_found_because(format!("no map image `{id}`"));
-    let id = parse_id(&id).filter(|&i| (i as usize) < localizer.map.meta().images).ok_or_else(missing)?;
+    let id = parse_id(&id)
+        .filter(|&i| (i as usize) < localizer.map.meta().images)
+        .ok_or_else(missing)?;
     let key = (localizer.map.meta().name.clone(), id, size);
     if let Some(jpeg) = state.thumbnails.get(&key) {
         return Ok(jpeg_response(jpeg));
@@ -174,7 +176,10 @@ fn jpeg_response(jpeg: Bytes) -> Response {
     (
         [
             (header::CONTENT_TYPE, HeaderValue::from_static("image/jpeg")),
-            (header::CACHE_CONTROL, HeaderValue::from_static("private, max-age=300")),
+            (
+                header::CACHE_CONTROL,
+                HeaderValue::from_static("private, max-age=300"),
+            ),
         ],
         jpeg,
     )
@@ -191,8 +196,20 @@ mod tests {
         assert_eq!(parse_id("199"), Some(199));
         assert_eq!(parse_id("4294967295"), Some(u32::MAX));
         for bad in [
-            "", "-1", "+1", " 1", "1 ", "1.0", "4294967296", "99999999999", "..", "../1",
-            "%2e%2e", "1/2", "0x10", "a",
+            "",
+            "-1",
+            "+1",
+            " 1",
+            "1 ",
+            "1.0",
+            "4294967296",
+            "99999999999",
+            "..",
+            "../1",
+            "%2e%2e",
+            "1/2",
+            "0x10",
+            "a",
         ] {
             assert_eq!(parse_id(bad), None, "{bad:?}");
         }
@@ -205,10 +222,17 @@ mod tests {
         std::fs::create_dir_all(inside.join("a")).unwrap();
         std::fs::write(inside.join("a/1.jpg"), b"x").unwrap();
         std::fs::write(root.path().join("secret.jpg"), b"x").unwrap();
-        std::os::unix::fs::symlink(root.path().join("secret.jpg"), inside.join("link.jpg")).unwrap();
+        std::os::unix::fs::symlink(root.path().join("secret.jpg"), inside.join("link.jpg"))
+            .unwrap();
         assert!(resolve(&inside, "a/1.jpg").is_some());
         assert!(resolve(&inside, "a/../a/1.jpg").is_some());
-        for bad in ["../secret.jpg", "a/../../secret.jpg", "link.jpg", "a", "missing.jpg"] {
+        for bad in [
+            "../secret.jpg",
+            "a/../../secret.jpg",
+            "link.jpg",
+            "a",
+            "missing.jpg",
+        ] {
             assert_eq!(resolve(&inside, bad), None, "{bad}");
         }
         let absolute = root.path().join("secret.jpg");
@@ -220,8 +244,14 @@ mod tests {
     fn sizes_are_checked() {
         assert_eq!(ThumbnailParams::size(None).unwrap(), DEFAULT_SIZE);
         assert_eq!(ThumbnailParams::size(Some("size=640")).unwrap(), 640);
-        for bad in ["size=15", "size=641", "size=-1", "size=abc", "size=", "width=3"] {
-            assert_eq!(ThumbnailParams::size(Some(bad)).unwrap_err().status, 400, "{bad}");
+        for bad in [
+            "size=15", "size=641", "size=-1", "size=abc", "size=", "width=3",
+        ] {
+            assert_eq!(
+                ThumbnailParams::size(Some(bad)).unwrap_err().status,
+                400,
+                "{bad}"
+            );
         }
     }
 }

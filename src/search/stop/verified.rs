@@ -87,7 +87,6 @@ impl StopRule for Verified {
 
     /// The leader's inliers at its last check, against m.
     fn statistic(&self, _: &Voter<'_>) -> Option<(f64, f64)> {
-        self.inliers
-            .map(|i| (i as f64, self.min_inliers as f64))
+        self.inliers.map(|i| (i as f64, self.min_inliers as f64))
     }
 }
