@@ -18,6 +18,9 @@
 //!    (on the first vocabulary);
 //! 6. [`table`] and [`plots`]: the outputs, with every query's answers in
 //!    `results.json` for re-scoring.
+//!
+//! [`shards`] replays the same queries on a map split into shards
+//! (`bowloc shards`).
 
 pub mod cache;
 pub mod equal_recall;
@@ -25,6 +28,7 @@ pub mod machine;
 pub mod metrics;
 pub mod plots;
 pub mod recommend;
+pub mod shards;
 pub mod summary;
 pub mod sweep;
 pub mod table;

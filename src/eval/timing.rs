@@ -3,10 +3,11 @@
 //! real blocked quantizer timed over all of the query's descriptors once,
 //! then charged per feature used) and voting (timed inside the search), with
 //! their median and 95th percentile over queries. Extraction and
-//! quantization are timed by the working thread's CPU time, so figures taken
-//! while other processes share the cores price the work as a quiet machine
-//! would; voting is timed on the wall clock inside the search (a small
-//! share of a request).
+//! quantization, and geometric verification, are timed by the working
+//! thread's CPU time, so figures taken while other processes share the cores
+//! price the work closer to what a quiet machine would (not exactly: a busy
+//! sibling hyperthread still slows a core); voting is timed on the wall clock
+//! inside the search (a small share of a request).
 
 use crate::quantize::Quantizer;
 use cpu_time::ThreadTime;

@@ -13,12 +13,15 @@
 //! - [`rank`]: top-n images with scores comparable across stop points;
 //! - [`trace`]: on request, the vote race as plain data (bounded).
 //!
+//! [`shard`] runs the same search over a map split into shards by image.
+//!
 //! [`Search`] is the streaming driver; [`search`] and [`search_words`] run it
 //! on one batch whose size is known up front. Pure Rust over plain arrays: no
 //! OpenCV, no HTTP.
 
 pub mod permute;
 pub mod rank;
+pub mod shard;
 pub mod stop;
 pub mod trace;
 pub mod vote;
@@ -26,7 +29,7 @@ pub mod vote;
 pub use rank::Ranked;
 pub use stop::{LeaderCheck, RuleSpec, StopRule};
 pub use trace::{Trace, TracePoint};
-pub use vote::{Needs, Tally, Voter};
+pub use vote::{Needs, Tally, VoteStats, Voter};
 
 use crate::index::MapIndex;
 use crate::quantize::Quantizer;

@@ -3,7 +3,7 @@
 //! compare across queries whatever the stop point and whether or not the
 //! query's feature count is known.
 
-use super::vote::Voter;
+use super::vote::{VoteStats, Voter};
 
 /// One ranked map image.
 #[derive(Debug, Clone, Copy, PartialEq)]

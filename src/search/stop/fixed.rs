@@ -3,7 +3,7 @@
 //! count N is unknown (tiles left to extract) the fraction is of its estimate.
 
 use super::{Grid, Parameter, Range, RuleInfo, StopRule};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "fixed",
@@ -22,13 +22,13 @@ pub const INFO: RuleInfo = RuleInfo {
 struct Fixed(f64);
 
 impl StopRule for Fixed {
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let (used, needed) = self.statistic(voter)?;
         (used >= needed).then(|| format!("fixed fraction {} reached", self.0))
     }
 
     /// Features voted and the features the fraction asks for.
-    fn statistic(&self, voter: &Voter<'_>) -> Option<(f64, f64)> {
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
         let t = voter.tally();
         let needed = (self.0 * t.total_or_estimate()).ceil().max(1.0);
         Some((t.features as f64, needed))

@@ -3,7 +3,7 @@
 //! reaches √(2·ln(2/δ)/t), Hoeffding's bound on two means of t samples each.
 
 use super::{Grid, Parameter, Range, RuleInfo, StopRule};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "hoeffding",
@@ -22,13 +22,13 @@ pub const INFO: RuleInfo = RuleInfo {
 struct Hoeffding(f64);
 
 impl StopRule for Hoeffding {
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let (gap, bound) = self.statistic(voter)?;
         (gap >= bound).then(|| format!("mean gap {gap:.4} ≥ Hoeffding bound {bound:.4}"))
     }
 
     /// The top-2 gap of mean votes (scaled to [0, 1]) and the bound.
-    fn statistic(&self, voter: &Voter<'_>) -> Option<(f64, f64)> {
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
         let t = voter.tally();
         if t.features == 0 || t.vote_cap <= 0.0 {
             return None;

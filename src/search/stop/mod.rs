@@ -13,13 +13,13 @@ mod relative;
 mod stable_peak;
 mod verified;
 
-use super::vote::{Needs, Voter};
+use super::vote::{Needs, VoteStats};
 use serde::{Deserialize, Serialize};
 
 /// A rule instance for one query.
 pub trait StopRule: Send {
     /// Called after each feature's vote; `Some(why)` stops the search.
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String>;
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String>;
 
     /// What the voter must track for this rule.
     fn needs(&self) -> Needs {
@@ -29,7 +29,7 @@ pub trait StopRule: Send {
     /// The number the rule compares with a threshold, and that threshold,
     /// as of the last check (for traces of the vote race); `None` for a rule
     /// that compares no single number.
-    fn statistic(&self, voter: &Voter<'_>) -> Option<(f64, f64)> {
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
         let _ = voter;
         None
     }
@@ -39,7 +39,7 @@ pub trait StopRule: Send {
     /// candidate against them. Vote rules ignore both.
     fn check_with(
         &mut self,
-        voter: &Voter<'_>,
+        voter: &dyn VoteStats,
         voted: &[(u32, u32)],
         leader_check: Option<&mut dyn LeaderCheck>,
     ) -> Option<String> {

@@ -6,7 +6,7 @@
 //! paper threshold T′ corresponds to T = T′·N.
 
 use super::{Grid, Parameter, Range, RuleInfo, StopRule};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "peak-mean",
@@ -29,12 +29,12 @@ pub const INFO: RuleInfo = RuleInfo {
 struct PeakMean(f64);
 
 impl StopRule for PeakMean {
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let (gap, threshold) = self.statistic(voter)?;
         (gap > threshold).then(|| format!("max − mean = {gap:.4} > {threshold}"))
     }
 
-    fn statistic(&self, voter: &Voter<'_>) -> Option<(f64, f64)> {
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
         let t = voter.tally();
         Some((t.max as f64 - t.mean(), self.0))
     }

@@ -1,7 +1,7 @@
 //! Rule 2 (`relative`): stop when (max(h) − mean(h)) / mean(h) > T.
 
 use super::{Grid, Parameter, Range, RuleInfo, StopRule};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "relative",
@@ -24,12 +24,12 @@ pub const INFO: RuleInfo = RuleInfo {
 struct Relative(f64);
 
 impl StopRule for Relative {
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let (ratio, threshold) = self.statistic(voter)?;
         (ratio > threshold).then(|| format!("(max − mean)/mean = {ratio:.4} > {threshold}"))
     }
 
-    fn statistic(&self, voter: &Voter<'_>) -> Option<(f64, f64)> {
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
         let t = voter.tally();
         let mean = t.mean();
         (mean > 0.0).then(|| ((t.max as f64 - mean) / mean, self.0))

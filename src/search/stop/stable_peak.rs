@@ -2,7 +2,7 @@
 //! consecutive features.
 
 use super::{Grid, Parameter, Range, RuleInfo, StopRule};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "stable-peak",
@@ -36,7 +36,7 @@ struct StablePeak {
 }
 
 impl StopRule for StablePeak {
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let t = voter.tally();
         if t.leader != self.leader {
             self.leader = t.leader;
@@ -47,7 +47,7 @@ impl StopRule for StablePeak {
             .then(|| format!("peak unchanged for {held} features"))
     }
 
-    fn statistic(&self, voter: &Voter<'_>) -> Option<(f64, f64)> {
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
         self.leader?;
         let held = voter.tally().features.saturating_sub(self.since);
         Some((held as f64, self.needed as f64))

@@ -12,7 +12,7 @@
 //! lead for [`STABLE`] features, at most once every [`EVERY`] features; a
 //! leader that failed is checked again only after [`RECHECK`] more features.
 
-use super::{Grid, LeaderCheck, Parameter, Range, RuleInfo, StopRule, Voter};
+use super::{Grid, LeaderCheck, Parameter, Range, RuleInfo, StopRule, VoteStats};
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "verified",
@@ -52,13 +52,13 @@ struct Verified {
 }
 
 impl StopRule for Verified {
-    fn check(&mut self, _: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, _: &dyn VoteStats) -> Option<String> {
         None
     }
 
     fn check_with(
         &mut self,
-        voter: &Voter<'_>,
+        voter: &dyn VoteStats,
         voted: &[(u32, u32)],
         leader_check: Option<&mut dyn LeaderCheck>,
     ) -> Option<String> {
@@ -86,7 +86,7 @@ impl StopRule for Verified {
     }
 
     /// The leader's inliers at its last check, against m.
-    fn statistic(&self, _: &Voter<'_>) -> Option<(f64, f64)> {
+    fn statistic(&self, _: &dyn VoteStats) -> Option<(f64, f64)> {
         self.inliers.map(|i| (i as f64, self.min_inliers as f64))
     }
 }
