@@ -6,10 +6,12 @@ use crate::dataset::ImageRef;
 use crate::features::fit::OpenCvFit;
 use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
 use crate::geometry::Keypoint;
-use crate::geometry::verify::{LeaderVerifier, VerifyParams, rerank, with_keypoints};
+use crate::geometry::verify::{
+    LeaderVerifier, VerifyParams, inlier_matches, rerank, with_keypoints,
+};
 use crate::index::{ImageWords, MapBuilder, MapIndex, Places};
 use crate::quantize::{Quantizer, QuantizerKind};
-use crate::report::{EdgeTimings, Extraction, ImageSize, Localization};
+use crate::report::{CandidateMatches, EdgeTimings, Extraction, ImageSize, Localization};
 use crate::search::{self, Search, SearchOptions};
 use crate::vocabulary::kmeans::{KmeansConfig, kmeans};
 use crate::vocabulary::{Vocabulary, VocabularyMeta};
@@ -31,6 +33,21 @@ pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
     );
     bar.set_message(what.to_owned());
     bar
+}
+
+/// Most points of a traced vote race (the sampling step doubles beyond).
+pub const TRACE_POINTS: usize = 256;
+
+/// What a query records of its vote race.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Tracing {
+    /// Nothing (the default).
+    #[default]
+    Off,
+    /// The race up to the stop.
+    On,
+    /// The race, and the full search over every feature for comparison.
+    Full,
 }
 
 /// One image's features and what reading them cost.
@@ -397,13 +414,27 @@ impl Localizer {
         let started = Instant::now();
         let votes: Vec<(u32, f32)> = answer.candidates.iter().map(|c| (c.id, c.score)).collect();
         let reranked = rerank(&self.map, &votes, query, &self.fit, &self.verify);
-        answer.verified(
+        let mut answer = answer.verified(
             &self.map,
             &reranked,
             options.top_n,
             options.min_score,
             started.elapsed(),
-        )
+        );
+        // a traced answer shows each candidate's inliers (not timed: the
+        // fits are repeated only to draw them)
+        if let Some(trace) = &mut answer.trace {
+            trace.matches = answer
+                .candidates
+                .iter()
+                .filter(|c| c.inliers.unwrap_or(0) > 0)
+                .map(|c| {
+                    let inliers = inlier_matches(&self.map, c.id, query, &self.fit, &self.verify);
+                    CandidateMatches::new(c.id, &inliers.query, &inliers.map)
+                })
+                .collect();
+        }
+        answer
     }
 
     /// Answer one query image given as encoded bytes: decode, then extract
@@ -427,6 +458,22 @@ impl Localizer {
         grid: TileGrid,
         verify: bool,
     ) -> Result<Localization, FeatureError> {
+        self.localize_traced(bytes, options, grid, verify, Tracing::Off)
+    }
+
+    /// [`Localizer::localize_tiled`], recording the vote race as `tracing`
+    /// asks. With [`Tracing::Full`] the remaining tiles are extracted after
+    /// the stop and every feature is voted by a second search without a
+    /// rule, to show where and with what answer the full search ends; that
+    /// work is not counted in the answer's timings.
+    pub fn localize_traced(
+        &self,
+        bytes: &[u8],
+        options: &SearchOptions,
+        grid: TileGrid,
+        verify: bool,
+        tracing: Tracing,
+    ) -> Result<Localization, FeatureError> {
         // a geometric stop verified its leader: its answer is verified too
         let verify = verify || options.rule.info().geometric;
         let (searched, options) = match verify {
@@ -446,38 +493,65 @@ impl Localizer {
         let mut extract = decoded.elapsed();
         let quantizer = self.vocab.quantizer(self.quantizer);
         let mut search = Search::new(&self.map, &searched);
+        let mut full = None;
+        if tracing != Tracing::Off {
+            search = search.trace(1, TRACE_POINTS);
+        }
+        if tracing == Tracing::Full {
+            let everything = SearchOptions {
+                rule: search::RuleSpec::new("none", None).expect("built-in rule"),
+                min_features: 0,
+                ..searched.clone()
+            };
+            full = Some(Search::new(&self.map, &everything).trace(1, TRACE_POINTS));
+        }
         let mut keypoints: Vec<Keypoint> = Vec::new();
+        let mut tiles_used = 0;
         loop {
+            if search.stopped() && full.as_ref().is_none_or(Search::stopped) {
+                break;
+            }
             let t = Instant::now();
             let Some(tile) = tiles.next_tile() else { break };
             let tile = tile?;
-            extract += t.elapsed();
+            let took = t.elapsed();
+            let last = tiles.extracted() == tiles.total();
+            if let Some(full) = &mut full {
+                let quantize = search::descriptor_quantizer(
+                    &*quantizer,
+                    tile.descriptors.view(),
+                    options.block,
+                );
+                full.feed_tile(tile.len(), tiles.area_extracted(), last, quantize, None);
+            }
+            if search.stopped() {
+                continue;
+            }
+            extract += took;
+            tiles_used += 1;
             keypoints.extend_from_slice(&tile.keypoints);
             let quantize =
                 search::descriptor_quantizer(&*quantizer, tile.descriptors.view(), options.block);
-            let last = tiles.extracted() == tiles.total();
             let mut check = LeaderVerifier {
                 map: &self.map,
                 fit: &self.fit,
                 params: &self.verify,
                 keypoints: &keypoints,
             };
-            if search.feed_tile(
+            search.feed_tile(
                 tile.len(),
                 tiles.area_extracted(),
                 last,
                 quantize,
                 Some(&mut check),
-            ) {
-                break;
-            }
+            );
         }
         let extraction = Extraction {
-            tiles_extracted: tiles.extracted(),
+            tiles_extracted: tiles_used,
             tiles_total: tiles.total(),
             grid,
             expected_features: search.tally().total_or_estimate(),
-            complete: tiles.extracted() == tiles.total(),
+            complete: tiles_used == tiles.total(),
         };
         let edge = EdgeTimings {
             decode: decoded - started,
@@ -485,7 +559,7 @@ impl Localizer {
         };
         let query = with_keypoints(search.voted(), &keypoints);
         let outcome = search.finish();
-        let answer = Localization::new(
+        let mut answer = Localization::new(
             &self.map,
             &options.rule,
             options.seed,
@@ -494,6 +568,12 @@ impl Localizer {
             edge,
             extraction,
         );
+        if let Some(full) = full {
+            answer.compare_with_full(&self.map, full.finish(), options.top_n);
+        }
+        if let Some(trace) = &mut answer.trace {
+            trace.frame_side = self.extract.max_side;
+        }
         Ok(if verify {
             self.verify(answer, &query, options)
         } else {

@@ -1,12 +1,13 @@
 //! The answer to one query as users see it, shared by `bowloc query` and the
 //! HTTP service: candidates with their map metadata, how many features were
-//! used and why the search stopped, and where the time went. The types also
+//! used and why the search stopped, where the time went and, on request, the
+//! vote race and the inlier matches (the trace). The types also
 //! describe themselves as OpenAPI schemas (utoipa) for the service's API
 //! document.
 
 use crate::features::TileGrid;
 use crate::index::{ImageInfo, MapIndex};
-use crate::search::{RuleSpec, SearchOutcome, StopInfo};
+use crate::search::{RuleSpec, SearchOutcome, StopInfo, Trace};
 use serde::Serialize;
 use std::collections::HashMap;
 use std::time::Duration;
@@ -47,6 +48,133 @@ pub struct Localization {
     /// least `min_inliers` inliers). Absent without verification.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub verified: Option<bool>,
+    /// With `trace=true` or `trace=full`: the vote race. Absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub trace: Option<RaceTrace>,
+}
+
+/// The vote race: the search's state as the features arrived, sampled
+/// every `every` features (at most 256 points and the stop), for drawing.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct RaceTrace {
+    /// Features between two sampled points (it doubles for long races to
+    /// keep the points bounded).
+    #[schema(minimum = 1)]
+    pub every: u32,
+    /// Sampled points in voting order; the last one is where the search
+    /// ended (`stop.at_feature`).
+    pub points: Vec<RacePoint>,
+    /// Features given to the search after each tile, in extraction order.
+    pub tile_ends: Vec<u32>,
+    /// Features voted before the rule was first consulted (`min_features`);
+    /// the statistic before it did not count.
+    pub warm_up: u32,
+    /// With `trace=full`: the same features voted to the end, without a
+    /// rule, every tile extracted.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub full: Option<FullRace>,
+    /// Longer side of the extraction frame: SIFT saw each image (query and
+    /// map) downscaled so its longer side is at most this (0: full size).
+    /// Match positions are in pixels of that frame.
+    pub frame_side: u32,
+    /// With verification: the inliers of each candidate that has some.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub matches: Vec<CandidateMatches>,
+}
+
+/// Most match lines reported per candidate.
+pub const MAX_MATCH_LINES: usize = 100;
+
+/// A verified candidate's inliers as lines between the two images.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct CandidateMatches {
+    /// The map image id.
+    pub id: u32,
+    /// Inlier pairs `[query x, query y, map x, map y]`, in pixels of each
+    /// image's extraction frame (`frame_side`); at most 100, evenly chosen.
+    pub lines: Vec<[f32; 4]>,
+}
+
+impl CandidateMatches {
+    /// The pairs `query[i]` ↔ `map[i]`, thinned evenly to at most
+    /// [`MAX_MATCH_LINES`].
+    pub fn new(id: u32, query: &[[f32; 2]], map: &[[f32; 2]]) -> Self {
+        let n = query.len().min(map.len());
+        let step = n.div_ceil(MAX_MATCH_LINES).max(1);
+        let lines = (0..n)
+            .step_by(step)
+            .map(|i| [query[i][0], query[i][1], map[i][0], map[i][1]])
+            .collect();
+        Self { id, lines }
+    }
+}
+
+/// The state of the race after `features` votes.
+#[derive(Debug, Clone, Copy, Serialize, ToSchema)]
+pub struct RacePoint {
+    /// Features voted so far.
+    pub features: u32,
+    /// The leading map image's id (absent before any vote reached one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub leader: Option<u32>,
+    /// The leader's summed votes, max(h).
+    pub leader_votes: f32,
+    /// The highest summed votes of any other image.
+    pub runner_up_votes: f32,
+    /// The mean vote over all map images, mean(h).
+    pub mean_votes: f64,
+    /// The number the rule compares with its threshold (absent for a rule
+    /// without one: `none`, `lossless`, `confident`; `verified` gives the
+    /// leader's inliers at its last check).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub statistic: Option<f64>,
+    /// The threshold the statistic must pass.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub threshold: Option<f64>,
+}
+
+/// The full search over every feature, for comparison with the answer.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct FullRace {
+    /// Features the full search voted (N, unless the deadline cut it).
+    pub features: usize,
+    /// `exhausted`, or `deadline` when the request's deadline cut it short.
+    pub stop: StopInfo,
+    #[schema(minimum = 1)]
+    pub every: u32,
+    pub points: Vec<RacePoint>,
+    /// The full search's best map images by votes (at most `top_n`, before
+    /// any verification).
+    pub candidates: Vec<Candidate>,
+}
+
+impl From<&Trace> for RaceTrace {
+    fn from(t: &Trace) -> Self {
+        Self {
+            every: t.every,
+            points: race_points(t),
+            tile_ends: t.batch_ends.clone(),
+            warm_up: t.warm_up,
+            full: None,
+            frame_side: 0,
+            matches: Vec::new(),
+        }
+    }
+}
+
+fn race_points(t: &Trace) -> Vec<RacePoint> {
+    t.points
+        .iter()
+        .map(|p| RacePoint {
+            features: p.features,
+            leader: p.leader,
+            leader_votes: p.leader_votes,
+            runner_up_votes: p.runner_up_votes,
+            mean_votes: p.mean_votes,
+            statistic: p.statistic.map(|s| s.0),
+            threshold: p.statistic.map(|s| s.1),
+        })
+        .collect()
 }
 
 /// One map image proposed as the query's place.
@@ -198,6 +326,16 @@ impl MapIdentity {
 }
 
 impl Candidate {
+    /// The ranked vote candidates of a search, with their map metadata.
+    fn ranked(map: &MapIndex, outcome: &SearchOutcome) -> Vec<Self> {
+        outcome
+            .candidates
+            .iter()
+            .enumerate()
+            .map(|(i, r)| Self::new(i + 1, r.score, map.image(r.id)))
+            .collect()
+    }
+
     fn new(rank: usize, score: f32, info: ImageInfo<'_>) -> Self {
         Self {
             rank,
@@ -253,12 +391,7 @@ impl Localization {
         edge: EdgeTimings,
         extraction: Extraction,
     ) -> Self {
-        let candidates = outcome
-            .candidates
-            .iter()
-            .enumerate()
-            .map(|(i, r)| Candidate::new(i + 1, r.score, map.image(r.id)))
-            .collect();
+        let candidates = Candidate::ranked(map, &outcome);
         let t = outcome.timings;
         Self {
             candidates,
@@ -282,7 +415,24 @@ impl Localization {
             },
             map: MapIdentity::of(map),
             verified: None,
+            trace: outcome.trace.as_ref().map(RaceTrace::from),
         }
+    }
+
+    /// Add the full search over every feature (traced) to the trace, for
+    /// comparison.
+    pub fn compare_with_full(&mut self, map: &MapIndex, full: SearchOutcome, top_n: usize) {
+        let Some(trace) = &mut self.trace else { return };
+        let Some(t) = &full.trace else { return };
+        let mut candidates = Candidate::ranked(map, &full);
+        candidates.truncate(top_n);
+        trace.full = Some(FullRace {
+            features: full.features_used,
+            every: t.every,
+            points: race_points(t),
+            candidates,
+            stop: full.stop,
+        });
     }
 
     /// Apply geometric verification: `reranked` holds the vote candidates of

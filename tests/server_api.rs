@@ -52,6 +52,7 @@ fn state(loaded: bool) -> Arc<AppState> {
     let mut config = Config::default();
     config.files.vocabulary = v.clone();
     config.files.map = m.clone();
+    config.files.images = common::dataset("rtabmap-loop");
     config.bootstrap.enabled = false;
     config.server.workers = 1;
     let state = AppState::new(config).unwrap();
@@ -210,4 +211,160 @@ async fn before_the_map_is_loaded_only_liveness_answers() {
     assert_eq!(status, StatusCode::SERVICE_UNAVAILABLE);
     let v: serde_json::Value = serde_json::from_slice(&body).unwrap();
     assert_eq!(v["error"]["code"], "shutting_down");
+}
+
+#[tokio::test]
+async fn thumbnails_are_read_by_map_id_only() {
+    let state = state(true);
+    let get = |path: &str| Request::get(path).body(Body::empty()).unwrap();
+    for (path, side) in [
+        ("/images/0/thumbnail", 160),
+        ("/images/11/thumbnail?size=64", 64),
+        ("/images/4/thumbnail?size=640", 512),
+    ] {
+        let (status, headers, body) = send(&state, get(path)).await;
+        assert_eq!(status, StatusCode::OK, "{path}");
+        assert_eq!(headers[header::CONTENT_TYPE], "image/jpeg");
+        let size = imagesize::blob_size(&body).unwrap();
+        assert_eq!(size.width.max(size.height), side, "{path}");
+    }
+    // outside the map (12 images), or anything that is not a plain id
+    for path in [
+        "/images/12/thumbnail",
+        "/images/4294967295/thumbnail",
+        "/images/99999999999999/thumbnail",
+        "/images/-1/thumbnail",
+        "/images/..%2F..%2F..%2Fetc%2Fpasswd/thumbnail",
+        "/images/%2Fetc%2Fpasswd/thumbnail",
+        "/images/images%2F5.jpg/thumbnail",
+        "/images/../../etc/passwd/thumbnail",
+        "/images/1%00/thumbnail",
+        "/images/0x1/thumbnail",
+    ] {
+        let (status, _, body) = send(&state, get(path)).await;
+        assert_eq!(status, StatusCode::NOT_FOUND, "{path}");
+        let v: serde_json::Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(v["error"]["code"], "not_found", "{path}");
+    }
+    let (status, _, _) = send(&state, get("/images/0/thumbnail?size=9999")).await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
+}
+
+#[tokio::test]
+async fn the_page_and_its_assets_are_served() {
+    let state = state(false);
+    for (path, media) in [
+        ("/", "text/html; charset=utf-8"),
+        ("/page.js", "text/javascript; charset=utf-8"),
+        ("/page.css", "text/css; charset=utf-8"),
+    ] {
+        let (status, headers, body) =
+            send(&state, Request::get(path).body(Body::empty()).unwrap()).await;
+        assert_eq!(status, StatusCode::OK, "{path}");
+        assert_eq!(headers[header::CONTENT_TYPE], media, "{path}");
+        assert!(headers.contains_key(header::CONTENT_SECURITY_POLICY));
+        assert!(!body.is_empty());
+    }
+}
+
+#[tokio::test]
+async fn the_trace_follows_the_race_to_the_stop_and_the_full_search_to_the_end() {
+    let state = state(true);
+    let answer = |q: &'static str| {
+        let state = state.clone();
+        async move {
+            let (status, _, body) = send(&state, localize(q, "application/json")).await;
+            assert_eq!(status, StatusCode::OK, "{q}");
+            serde_json::from_slice::<serde_json::Value>(&body).unwrap()
+        }
+    };
+    let plain = answer("seed=3&rule=peak-mean&threshold=20&tiles=2x2").await;
+    assert!(plain.get("trace").is_none(), "no trace unless asked");
+    let traced = answer("seed=3&rule=peak-mean&threshold=20&tiles=2x2&trace=full").await;
+    // tracing changes nothing of the answer
+    for key in ["candidates", "features", "stop", "tiles"] {
+        assert_eq!(plain[key], traced[key], "{key}");
+    }
+    let t = &traced["trace"];
+    let points = t["points"].as_array().unwrap();
+    assert!(!points.is_empty() && points.len() <= 257);
+    let stop = traced["stop"]["at_feature"].as_u64().unwrap();
+    assert_eq!(points.last().unwrap()["features"].as_u64().unwrap(), stop);
+    let last = points.last().unwrap();
+    assert_eq!(traced["stop"]["kind"], "rule");
+    assert!(last["statistic"].as_f64().unwrap() > last["threshold"].as_f64().unwrap());
+    assert_eq!(last["threshold"].as_f64().unwrap(), 20.0);
+    // before the stop the statistic had not passed the threshold
+    for p in &points[..points.len() - 1] {
+        assert!(p["statistic"].as_f64().unwrap() <= 20.0, "{p}");
+        assert!(p["leader_votes"].as_f64() >= p["runner_up_votes"].as_f64());
+    }
+    let full = &t["full"];
+    let n = full["features"].as_u64().unwrap();
+    assert!(n > stop, "the full search votes every feature");
+    assert_eq!(full["stop"]["kind"], "exhausted");
+    assert_eq!(
+        full["points"].as_array().unwrap().last().unwrap()["features"].as_u64(),
+        Some(n)
+    );
+    // the same features in the same order: the two races agree up to the stop
+    let full_at: std::collections::HashMap<u64, &serde_json::Value> = full["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| (p["features"].as_u64().unwrap(), p))
+        .collect();
+    let mut shared = 0;
+    for p in points {
+        if let Some(q) = full_at.get(&p["features"].as_u64().unwrap()) {
+            assert_eq!(p["leader_votes"], q["leader_votes"]);
+            assert_eq!(p["runner_up_votes"], q["runner_up_votes"]);
+            shared += 1;
+        }
+    }
+    assert!(shared > 0);
+    let tile_ends = t["tile_ends"].as_array().unwrap();
+    assert_eq!(
+        tile_ends.len() as u64,
+        traced["tiles"]["extracted"].as_u64().unwrap()
+    );
+    assert!(!full["candidates"].as_array().unwrap().is_empty());
+}
+
+#[tokio::test]
+async fn the_protobuf_answer_carries_the_trace() {
+    let state = state(true);
+    let q = "seed=5&trace=full&verify=true";
+    let (status, _, json) = send(&state, localize(q, "application/json")).await;
+    assert_eq!(status, StatusCode::OK);
+    let json: serde_json::Value = serde_json::from_slice(&json).unwrap();
+    let (status, _, bytes) = send(&state, localize(q, "application/x-protobuf")).await;
+    assert_eq!(status, StatusCode::OK);
+    let t = pb::Localization::decode(bytes.as_slice())
+        .unwrap()
+        .trace
+        .unwrap();
+    let j = &json["trace"];
+    assert_eq!(t.points.len(), j["points"].as_array().unwrap().len());
+    assert_eq!(t.every as u64, j["every"].as_u64().unwrap());
+    assert_eq!(t.warm_up as u64, j["warm_up"].as_u64().unwrap());
+    assert_eq!(t.frame_side, 640);
+    let last = t.points.last().unwrap();
+    assert_eq!(
+        last.features as u64,
+        json["stop"]["at_feature"].as_u64().unwrap()
+    );
+    let full = t.full.unwrap();
+    assert_eq!(full.features, j["full"]["features"].as_u64().unwrap());
+    assert_eq!(
+        full.candidates.len(),
+        j["full"]["candidates"].as_array().unwrap().len()
+    );
+    // verified: the top candidate's inliers as lines, as many as in JSON
+    assert!(!t.matches.is_empty());
+    assert_eq!(
+        t.matches[0].lines.len(),
+        j["matches"][0]["lines"].as_array().unwrap().len()
+    );
+    assert!(t.matches[0].lines.len() >= 4);
 }

@@ -83,6 +83,8 @@ workers = $1
 [files]
 vocabulary = "${3:-data/load}/vocab.bowvoc"
 map = "${3:-data/load}/map.bowmap"
+# the load map's images (thumbnails); another map's are not served
+images = "$([ -z "${3:-}" ] && echo "$DATASET")"
 [limits]
 queue = $2
 ${4:-}

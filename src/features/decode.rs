@@ -75,14 +75,23 @@ pub fn probe(bytes: &[u8], limits: DecodeLimits) -> Result<(), FeatureError> {
 /// Decode an in-memory image to 8-bit grayscale (colour, alpha and 16-bit
 /// samples are converted), after [`probe`] has checked its header.
 pub fn decode(bytes: &[u8], limits: DecodeLimits) -> Result<GrayImage, FeatureError> {
+    decode_as(bytes, limits, opencv::imgcodecs::IMREAD_GRAYSCALE).map(GrayImage)
+}
+
+/// [`probe`], then decode with OpenCV's `imread` `flags` (grayscale, colour).
+pub(super) fn decode_as(
+    bytes: &[u8],
+    limits: DecodeLimits,
+    flags: i32,
+) -> Result<Mat, FeatureError> {
     probe(bytes, limits)?;
     let buf = Vector::<u8>::from_slice(bytes);
-    let mat = opencv::imgcodecs::imdecode(&buf, opencv::imgcodecs::IMREAD_GRAYSCALE)
+    let mat = opencv::imgcodecs::imdecode(&buf, flags)
         .map_err(|e| FeatureError::Undecodable(e.message))?;
     if mat.empty() || mat.rows() == 0 || mat.cols() == 0 {
         return Err(FeatureError::Undecodable("damaged image data".into()));
     }
-    Ok(GrayImage(mat))
+    Ok(mat)
 }
 
 /// Read and decode an image file.

@@ -48,21 +48,7 @@ impl Frame {
     /// Downscale `image` and prepare the detector. `max_features` overrides
     /// the configured cap (a tile keeps its share of the image's cap).
     pub fn new(image: &GrayImage, config: &ExtractConfig) -> Result<Self, FeatureError> {
-        let mat = match downscale_size(image, config.max_side) {
-            Some(size) => {
-                let mut out = Mat::default();
-                opencv::imgproc::resize(
-                    &image.0,
-                    &mut out,
-                    size,
-                    0.0,
-                    0.0,
-                    opencv::imgproc::INTER_AREA,
-                )?;
-                out
-            }
-            None => image.0.clone(),
-        };
+        let mat = downscale(&image.0, config.max_side)?;
         let p = &config.sift;
         let sift = SIFT::create(
             0,
@@ -245,8 +231,20 @@ pub fn extract_file(
     extract(&decode_file(path, limits)?, config)
 }
 
-fn downscale_size(image: &GrayImage, max_side: u32) -> Option<Size> {
-    let (w, h) = (image.width(), image.height());
+/// `mat` downscaled (area interpolation) so its longer side is at most
+/// `max_side` (0: unchanged): the frame SIFT sees, and the one thumbnails
+/// of that size show.
+pub(super) fn downscale(mat: &Mat, max_side: u32) -> Result<Mat, FeatureError> {
+    let Some(size) = downscale_size(mat.cols().max(0) as u32, mat.rows().max(0) as u32, max_side)
+    else {
+        return Ok(mat.clone());
+    };
+    let mut out = Mat::default();
+    opencv::imgproc::resize(mat, &mut out, size, 0.0, 0.0, opencv::imgproc::INTER_AREA)?;
+    Ok(out)
+}
+
+fn downscale_size(w: u32, h: u32, max_side: u32) -> Option<Size> {
     let longest = w.max(h);
     if max_side == 0 || longest <= max_side {
         return None;

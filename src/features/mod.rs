@@ -6,11 +6,13 @@ mod config;
 mod decode;
 mod extract;
 pub mod fit;
+mod thumbnail;
 mod tiles;
 
 pub use config::{ExtractConfig, SiftParams};
 pub use decode::{DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe};
 pub use extract::{Descriptors, Features, Frame, Scales, extract, extract_file};
+pub use thumbnail::thumbnail;
 pub use tiles::{TileGrid, Tiles};
 
 /// Why an image yielded no descriptors.

@@ -220,12 +220,25 @@ fn distinct(points: impl Iterator<Item = [f32; 2]>) -> usize {
 
 /// Count the inliers of a robust fit to `c`.
 pub fn count_inliers(c: &Correspondences, fit: &dyn ModelFit, min_inliers: usize) -> Verification {
+    fit_inliers(c, fit, min_inliers).0
+}
+
+/// [`count_inliers`], with the inliers as matched positions (empty when
+/// none count).
+pub fn fit_inliers(
+    c: &Correspondences,
+    fit: &dyn ModelFit,
+    min_inliers: usize,
+) -> (Verification, Correspondences) {
     let matches = c.len();
-    let none = Verification {
-        matches,
-        inliers: 0,
-        verified: false,
-    };
+    let none = (
+        Verification {
+            matches,
+            inliers: 0,
+            verified: false,
+        },
+        Correspondences::default(),
+    );
     // fewer matches than the model needs, or than a verified candidate has
     // inliers: no fit can verify it, so none is run
     let needed = fit.params().model.min_matches();
@@ -254,12 +267,31 @@ pub fn count_inliers(c: &Correspondences, fit: &dyn ModelFit, min_inliers: usize
     if thinnest_spread(&q) < MIN_SPREAD_PX || thinnest_spread(&m) < MIN_SPREAD_PX {
         return none;
     }
-    let inliers = distinct(q.into_iter()).min(distinct(m.into_iter()));
-    Verification {
+    let inliers = distinct(q.iter().copied()).min(distinct(m.iter().copied()));
+    let verification = Verification {
         matches,
         inliers,
         verified: inliers >= min_inliers.max(1),
-    }
+    };
+    (verification, Correspondences { query: q, map: m })
+}
+
+/// The inliers of map image `image` against the query's features, as
+/// matched positions in each image's extraction frame (what a page draws
+/// as match lines).
+pub fn inlier_matches(
+    map: &MapIndex,
+    image: u32,
+    query: &[(u32, Keypoint)],
+    fit: &dyn ModelFit,
+    params: &VerifyParams,
+) -> Correspondences {
+    let c = tentative(
+        &QueryFeatures::new(query),
+        map.geometry(image),
+        params.max_word_pairs,
+    );
+    fit_inliers(&c, fit, params.min_inliers).1
 }
 
 /// Verify one map image's stored features against the query's.

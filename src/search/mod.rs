@@ -10,7 +10,8 @@
 //! - [`stop`]: the rule is checked after every vote, so a stop in mid-block
 //!   wastes at most one block of quantization; once it fires, the caller
 //!   extracts no more batches;
-//! - [`rank`]: top-n images with scores comparable across stop points.
+//! - [`rank`]: top-n images with scores comparable across stop points;
+//! - [`trace`]: on request, the vote race as plain data (bounded).
 //!
 //! [`shard`] runs the same search over a map split into shards by image.
 //!
@@ -22,10 +23,12 @@ pub mod permute;
 pub mod rank;
 pub mod shard;
 pub mod stop;
+pub mod trace;
 pub mod vote;
 
 pub use rank::Ranked;
 pub use stop::{LeaderCheck, RuleSpec, StopRule};
+pub use trace::{Trace, TracePoint};
 pub use vote::{Needs, Tally, VoteStats, Voter};
 
 use crate::index::MapIndex;
@@ -126,6 +129,8 @@ pub struct SearchOutcome {
     pub features_used: usize,
     pub stop: StopInfo,
     pub timings: SearchTimings,
+    /// The vote race, when the search was traced.
+    pub trace: Option<Trace>,
 }
 
 impl SearchOutcome {
@@ -159,6 +164,7 @@ pub struct Search<'m> {
     /// (feature number over all batches, word) of every feature voted, in
     /// voting order.
     voted: Vec<(u32, u32)>,
+    trace: Option<Trace>,
 }
 
 impl<'m> Search<'m> {
@@ -177,7 +183,17 @@ impl<'m> Search<'m> {
             batches: 0,
             fed: 0,
             voted: Vec::new(),
+            trace: None,
         }
+    }
+
+    /// Record the vote race: a point every `every` features, at most
+    /// `max_points` of them (the step doubles when they would be more).
+    pub fn trace(mut self, every: u32, max_points: usize) -> Self {
+        let mut trace = Trace::new(every, max_points);
+        trace.warm_up = self.options.min_features.min(u32::MAX as usize) as u32;
+        self.trace = Some(trace);
+        self
     }
 
     /// Whether the search has stopped (rule or deadline): feed no more.
@@ -233,6 +249,9 @@ impl<'m> Search<'m> {
         let offset = self.fed as u32;
         self.batches += 1;
         self.fed += count;
+        if let Some(trace) = &mut self.trace {
+            trace.batch_end(self.fed);
+        }
         let block = self.options.block.max(1);
         for indices in order.chunks(block) {
             if self.options.deadline.is_some_and(|d| Instant::now() >= d) {
@@ -247,20 +266,27 @@ impl<'m> Search<'m> {
             for (&i, &w) in indices.iter().zip(&self.words[..indices.len()]) {
                 self.voter.vote(w);
                 self.voted.push((offset + i, w));
-                if self.voter.tally().features < self.options.min_features {
-                    continue;
-                }
-                // A geometric check costs far more than a vote, and stopping
-                // inside a batch saves no extraction: only at a batch's end.
-                let at_end = self.voted.len() == self.fed;
-                let check = leader_check
-                    .as_mut()
-                    .filter(|_| at_end)
-                    .map(|c| &mut **c as &mut dyn LeaderCheck);
-                let started = at_end.then(Instant::now);
-                let why = self.rule.check_with(&self.voter, &self.voted, check);
-                if let Some(started) = started {
-                    checking += started.elapsed();
+                let features = self.voter.tally().features;
+                let why = if features < self.options.min_features {
+                    None
+                } else {
+                    // A geometric check costs far more than a vote, and stopping
+                    // inside a batch saves no extraction: only at a batch's end.
+                    let at_end = self.voted.len() == self.fed;
+                    let check = leader_check
+                        .as_mut()
+                        .filter(|_| at_end)
+                        .map(|c| &mut **c as &mut dyn LeaderCheck);
+                    let started = at_end.then(Instant::now);
+                    let why = self.rule.check_with(&self.voter, &self.voted, check);
+                    if let Some(started) = started {
+                        checking += started.elapsed();
+                    }
+                    why
+                };
+                if let Some(trace) = self.trace.as_mut().filter(|t| t.wants(features)) {
+                    let statistic = self.rule.statistic(&self.voter);
+                    trace.record(TracePoint::of(self.voter.tally(), statistic));
                 }
                 if let Some(why) = why {
                     self.stop = Some((StopKind::Rule, why));
@@ -304,6 +330,11 @@ impl<'m> Search<'m> {
             .stop
             .unwrap_or_else(|| (StopKind::Exhausted, "all features used".to_owned()));
         let used = self.voter.tally().features;
+        let mut trace = self.trace;
+        if let Some(trace) = &mut trace {
+            let statistic = self.rule.statistic(&self.voter);
+            trace.finish(TracePoint::of(self.voter.tally(), statistic));
+        }
         SearchOutcome {
             candidates: rank::top_n(&self.voter, self.options.top_n, self.options.min_score),
             features_total: self.fed,
@@ -314,6 +345,7 @@ impl<'m> Search<'m> {
                 detail,
             },
             timings: self.timings,
+            trace,
         }
     }
 }

@@ -398,6 +398,8 @@ pub fn search_tiles(
                 detail,
             },
             timings: SearchTimings::default(),
+            // the sharded search records no race
+            trace: None,
         },
         traffic,
     }

@@ -229,3 +229,91 @@ fn min_features_delays_the_rule() {
     };
     assert_eq!(search_words(&map, query, &o).features_used, 15);
 }
+
+/// A traced search: the same answer as untraced, a bounded race whose last
+/// point is the stop, and each rule's statistic passing its threshold only
+/// there.
+#[test]
+fn traces_record_the_race_without_changing_it() {
+    let (map, lists) = random_map(80, 5);
+    let query: Vec<u32> = lists[7]
+        .iter()
+        .chain(&lists[9])
+        .copied()
+        .cycle()
+        .take(900)
+        .collect();
+    let tiles: Vec<&[u32]> = query.chunks(300).collect();
+    let mut stopped_early = 0;
+    for (rule, p) in [
+        ("peak-mean", Some(3.0)),
+        ("relative", Some(1.5)),
+        ("stable-peak", Some(60.0)),
+        ("hoeffding", Some(0.1)),
+        ("fixed", Some(0.4)),
+        ("none", None),
+    ] {
+        let o = opts(rule, p, 11);
+        let run = |traced: bool| {
+            let mut s = Search::new(&map, &o);
+            if traced {
+                s = s.trace(1, 64);
+            }
+            for (k, words) in tiles.iter().enumerate() {
+                let quantize = |indices: &[u32], out: &mut [u32]| {
+                    for (o, &i) in out.iter_mut().zip(indices) {
+                        *o = words[i as usize];
+                    }
+                };
+                let share = (k + 1) as f64 / tiles.len() as f64;
+                if s.feed_tile(words.len(), share, k + 1 == tiles.len(), quantize, None) {
+                    break;
+                }
+            }
+            s.finish()
+        };
+        let (plain, traced) = (run(false), run(true));
+        assert!(plain.trace.is_none());
+        assert_eq!(plain.stop, traced.stop, "{rule}");
+        assert_eq!(plain.candidates, traced.candidates, "{rule}");
+        let t = traced.trace.unwrap();
+        assert!(t.points.len() <= 65, "{rule}: {}", t.points.len());
+        let last = t.points.last().unwrap();
+        assert_eq!(last.features as usize, traced.stop.at_feature, "{rule}");
+        assert_eq!(t.batch_ends, vec![300u32, 600, 900][..t.batch_ends.len()]);
+        for w in t.points.windows(2) {
+            assert!(w[0].features < w[1].features);
+            assert!(
+                w[0].leader_votes <= w[1].leader_votes,
+                "{rule}: votes only grow"
+            );
+        }
+        if rule == "none" {
+            assert_eq!(traced.stop.kind, StopKind::Exhausted);
+            assert!(t.points.iter().all(|p| p.statistic.is_none()));
+            continue;
+        }
+        // rules 1 and 2 stop above their threshold, the others at it
+        let passed = |(s, threshold): (f64, f64)| match rule {
+            "peak-mean" | "relative" => s > threshold,
+            _ => s >= threshold,
+        };
+        for p in &t.points[..t.points.len() - 1] {
+            assert!(
+                !p.statistic.is_some_and(passed),
+                "{rule}: passed before the stop"
+            );
+        }
+        let stopped = traced.stop.kind == StopKind::Rule;
+        assert_eq!(
+            last.statistic.is_some_and(passed),
+            stopped,
+            "{rule}: {last:?}"
+        );
+        stopped_early += usize::from(stopped);
+    }
+    assert!(
+        stopped_early >= 3,
+        "only {stopped_early} rules stopped early"
+    );
+}

@@ -66,6 +66,10 @@ pub struct FilesConfig {
     pub map: PathBuf,
     /// Recompute every checksum when loading.
     pub verify: bool,
+    /// The folder the map's image names are relative to (the dataset it
+    /// was built from): `GET /images/{id}/thumbnail` reads image `id` from
+    /// it. Empty: no thumbnails (404).
+    pub images: PathBuf,
 }
 
 /// Search settings used when a request does not give them.
@@ -146,6 +150,7 @@ impl Default for FilesConfig {
             vocabulary: PathBuf::from("data/default/vocab.bowvoc"),
             map: PathBuf::from("data/default/map.bowmap"),
             verify: true,
+            images: PathBuf::from("../shared/datasets/gardens-point"),
         }
     }
 }

@@ -205,7 +205,12 @@ impl ApiError {
     }
 
     pub fn not_found() -> Self {
-        Self::new(StatusCode::NOT_FOUND, "not_found", "no such route")
+        Self::not_found_because("no such route")
+    }
+
+    /// 404 `not_found` saying what was not found.
+    pub fn not_found_because(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::NOT_FOUND, "not_found", message)
     }
 
     pub fn method_not_allowed() -> Self {

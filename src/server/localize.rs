@@ -8,6 +8,7 @@ use super::openapi::Binary;
 use super::proto;
 use super::workers::PoolError;
 use crate::features::TileGrid;
+use crate::pipeline::Tracing;
 use crate::report::Localization;
 use crate::search::stop::{GENERIC_PARAMETER, parse_rule};
 use crate::search::{RuleSpec, SearchOptions};
@@ -71,6 +72,14 @@ pub struct LocalizeParams {
     /// With verification the score is the inlier count.
     #[param(value_type = Option<bool>)]
     pub verify: Option<String>,
+    /// Return the vote race in `trace` (`true`): the leader's and the
+    /// runner-up's votes, the mean vote and the rule's statistic against its
+    /// threshold as the features arrived (at most 256 points). `full` also
+    /// extracts every tile and votes every feature without a rule, to show
+    /// where the full search ends and what it answers (that extra work is
+    /// not in `timings_ms`). Default `false`.
+    #[param(value_type = Option<String>, pattern = "^(true|false|full)$")]
+    pub trace: Option<String>,
 }
 
 /// What a request may ask for within the configuration.
@@ -150,6 +159,19 @@ impl LocalizeParams {
             Some(v) => Err(ApiError::invalid_parameter(
                 "verify",
                 format!("`{v}` is not `true` or `false`"),
+            )),
+        }
+    }
+
+    /// What to record of the vote race.
+    pub fn tracing(&self) -> Result<Tracing, ApiError> {
+        match self.trace.as_deref().map(str::trim) {
+            None | Some("false") => Ok(Tracing::Off),
+            Some("true") => Ok(Tracing::On),
+            Some("full") => Ok(Tracing::Full),
+            Some(v) => Err(ApiError::invalid_parameter(
+                "trace",
+                format!("`{v}` is not `true`, `false` or `full`"),
             )),
         }
     }
@@ -417,6 +439,7 @@ pub async fn localize(
     let mut options = params.options(&state.defaults)?;
     let tiles = params.tiles(localizer.tiles)?;
     let verify = params.verify(state.config.verify.enabled)?;
+    let tracing = params.tracing()?;
     options.deadline = Some(deadline);
     // A body still arriving at the deadline is not waited for.
     let image = tokio::time::timeout_at(deadline.into(), read_image(&state, request))
@@ -430,7 +453,7 @@ pub async fn localize(
             if Instant::now() >= deadline {
                 return Err(ApiError::deadline_exceeded()); // no work for a lost cause
             }
-            Ok(localizer.localize_tiled(&image, &options, tiles, verify)?)
+            Ok(localizer.localize_traced(&image, &options, tiles, verify, tracing)?)
         })
         .await
         .map_err(|e| match e {
@@ -609,6 +632,18 @@ mod tests {
         assert!(p("verify=true").verify(false).unwrap());
         assert!(!p("verify=false").verify(true).unwrap());
         assert_eq!(p("verify=1").verify(true).unwrap_err().status, 400);
+    }
+
+    #[test]
+    fn trace_is_off_unless_asked() {
+        let p = |q: &str| LocalizeParams::from_query(Some(q)).unwrap().tracing();
+        assert_eq!(p("").unwrap(), Tracing::Off);
+        assert_eq!(p("trace=false").unwrap(), Tracing::Off);
+        assert_eq!(p("trace=true").unwrap(), Tracing::On);
+        assert_eq!(p("trace=full").unwrap(), Tracing::Full);
+        for bad in ["trace=1", "trace=", "trace=yes"] {
+            assert_eq!(p(bad).unwrap_err().status, 400, "{bad}");
+        }
     }
 
     #[test]

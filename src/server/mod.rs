@@ -11,6 +11,8 @@
 //! - [`bootstrap`]: building a missing default map, then loading;
 //! - [`localize`]: `POST /localize`, its parameters and body;
 //! - [`status`]: health, readiness, `/map`, `/metrics`, `/openapi.json`;
+//! - [`page`]: the page for people at `GET /`, its script and style;
+//! - [`thumbnails`]: `GET /images/{id}/thumbnail`, map images for the page;
 //! - [`workers`]: the bounded pool for CPU work;
 //! - [`errors`]: error answers as JSON;
 //! - [`middleware`]: request ids, request logs and metrics, panics;
@@ -25,8 +27,10 @@ pub mod localize;
 pub mod metrics;
 pub mod middleware;
 pub mod openapi;
+pub mod page;
 pub mod proto;
 pub mod status;
+pub mod thumbnails;
 pub mod workers;
 
 use crate::pipeline::Localizer;
@@ -56,6 +60,8 @@ pub struct AppState {
     localizer: OnceLock<Arc<Localizer>>,
     /// What loading (or bootstrapping) the map is doing now.
     loading: bootstrap::Progress,
+    /// Map images made small for the page.
+    thumbnails: thumbnails::ThumbnailCache,
     shutting_down: AtomicBool,
 }
 
@@ -86,6 +92,7 @@ impl AppState {
             metrics,
             localizer: OnceLock::new(),
             loading: bootstrap::Progress::default(),
+            thumbnails: thumbnails::ThumbnailCache::default(),
             shutting_down: AtomicBool::new(false),
         }))
     }
@@ -142,6 +149,10 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/map", get(status::map))
         .route("/metrics", get(status::metrics))
         .route("/openapi.json", get(status::openapi))
+        .route("/", get(page::index))
+        .route("/page.js", get(page::script))
+        .route("/page.css", get(page::style))
+        .route("/images/{id}/thumbnail", get(thumbnails::thumbnail))
         .fallback(|| async { ApiError::not_found() })
         .method_not_allowed_fallback(|| async { ApiError::method_not_allowed() })
         .layer(

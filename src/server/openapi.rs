@@ -6,8 +6,10 @@
 use super::errors::{ErrorBody, ErrorDetail};
 use super::localize::{self, ImageUpload};
 use super::status::{self, MapInfo, Status};
+use super::{page, thumbnails};
 use crate::report::{
-    Candidate, FeatureUse, ImageSize, Localization, MapIdentity, RuleReport, Timings,
+    Candidate, CandidateMatches, FeatureUse, FullRace, ImageSize, Localization, MapIdentity,
+    RacePoint, RaceTrace, RuleReport, Timings,
 };
 use crate::search::StopInfo;
 use crate::search::stop::{RULES, rule_names};
@@ -31,14 +33,20 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
         status::map,
         status::metrics,
         status::openapi,
+        thumbnails::thumbnail,
+        page::index,
+        page::script,
+        page::style,
     ),
     components(schemas(
         Localization, Candidate, FeatureUse, RuleReport, StopInfo, ImageSize, Timings,
-        MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload, Binary,
+        MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload, Binary, RaceTrace,
+        RacePoint, FullRace, CandidateMatches,
     )),
     tags(
         (name = "localize", description = "Localize a query image against the loaded map."),
         (name = "operations", description = "Health, readiness, metrics and descriptions."),
+        (name = "page", description = "The page for people at `/` and the map image thumbnails it shows."),
     )
 )]
 struct ApiDoc;

@@ -3,8 +3,8 @@
 //! from `proto/localize.proto`, and the conversion from
 //! [`report::Localization`](crate::report::Localization).
 
-use crate::report::Localization;
-use crate::search::StopKind;
+use crate::report::{Candidate, Localization, RacePoint, RaceTrace};
+use crate::search::{StopInfo, StopKind};
 
 /// Generated from `proto/localize.proto` (package `bowloc.v1`).
 pub mod pb {
@@ -26,21 +26,7 @@ pub fn stop_kind_name(kind: StopKind) -> String {
 impl From<&Localization> for pb::Localization {
     fn from(a: &Localization) -> Self {
         Self {
-            candidates: a
-                .candidates
-                .iter()
-                .map(|c| pb::Candidate {
-                    rank: c.rank as u32,
-                    id: c.id,
-                    name: c.name.clone(),
-                    score: c.score,
-                    votes: c.votes,
-                    inliers: c.inliers,
-                    verified: c.verified,
-                    place: c.place.clone(),
-                    pose: c.pose.clone().unwrap_or_default(),
-                })
-                .collect(),
+            candidates: a.candidates.iter().map(candidate).collect(),
             features: Some(pb::FeatureUse {
                 total: a.features.total as u64,
                 used: a.features.used as u64,
@@ -57,11 +43,7 @@ impl From<&Localization> for pb::Localization {
                 parameter: a.rule.parameter.map(str::to_owned),
                 value: a.rule.value,
             }),
-            stop: Some(pb::Stop {
-                kind: stop_kind_name(a.stop.kind),
-                at_feature: a.stop.at_feature as u64,
-                detail: a.stop.detail.clone(),
-            }),
+            stop: Some(stop(&a.stop)),
             seed: a.seed,
             image: Some(pb::ImageSize {
                 width: a.image.width,
@@ -82,7 +64,79 @@ impl From<&Localization> for pb::Localization {
                 vocabulary: a.map.vocabulary.clone(),
             }),
             verified: a.verified,
+            trace: a.trace.as_ref().map(trace),
         }
+    }
+}
+
+fn candidate(c: &Candidate) -> pb::Candidate {
+    pb::Candidate {
+        rank: c.rank as u32,
+        id: c.id,
+        name: c.name.clone(),
+        score: c.score,
+        votes: c.votes,
+        inliers: c.inliers,
+        verified: c.verified,
+        place: c.place.clone(),
+        pose: c.pose.clone().unwrap_or_default(),
+    }
+}
+
+fn stop(s: &StopInfo) -> pb::Stop {
+    pb::Stop {
+        kind: stop_kind_name(s.kind),
+        at_feature: s.at_feature as u64,
+        detail: s.detail.clone(),
+    }
+}
+
+fn points(points: &[RacePoint]) -> Vec<pb::RacePoint> {
+    points
+        .iter()
+        .map(|p| pb::RacePoint {
+            features: p.features,
+            leader: p.leader,
+            leader_votes: p.leader_votes,
+            runner_up_votes: p.runner_up_votes,
+            mean_votes: p.mean_votes,
+            statistic: p.statistic,
+            threshold: p.threshold,
+        })
+        .collect()
+}
+
+fn trace(t: &RaceTrace) -> pb::Trace {
+    pb::Trace {
+        every: t.every,
+        points: points(&t.points),
+        tile_ends: t.tile_ends.clone(),
+        warm_up: t.warm_up,
+        full: t.full.as_ref().map(|f| pb::FullRace {
+            features: f.features as u64,
+            stop: Some(stop(&f.stop)),
+            every: f.every,
+            points: points(&f.points),
+            candidates: f.candidates.iter().map(candidate).collect(),
+        }),
+        frame_side: t.frame_side,
+        matches: t
+            .matches
+            .iter()
+            .map(|m| pb::CandidateMatches {
+                id: m.id,
+                lines: m
+                    .lines
+                    .iter()
+                    .map(|&[query_x, query_y, map_x, map_y]| pb::MatchLine {
+                        query_x,
+                        query_y,
+                        map_x,
+                        map_y,
+                    })
+                    .collect(),
+            })
+            .collect(),
     }
 }
 

@@ -23,8 +23,14 @@ struct Fixed(f64);
 
 impl StopRule for Fixed {
     fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
+        let (used, needed) = self.statistic(voter)?;
+        (used >= needed).then(|| format!("fixed fraction {} reached", self.0))
+    }
+
+    /// Features voted and the features the fraction asks for.
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
         let t = voter.tally();
-        let needed = (self.0 * t.total_or_estimate()).ceil() as usize;
-        (t.features >= needed.max(1)).then(|| format!("fixed fraction {} reached", self.0))
+        let needed = (self.0 * t.total_or_estimate()).ceil().max(1.0);
+        Some((t.features as f64, needed))
     }
 }

@@ -23,13 +23,18 @@ struct Hoeffding(f64);
 
 impl StopRule for Hoeffding {
     fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
+        let (gap, bound) = self.statistic(voter)?;
+        (gap >= bound).then(|| format!("mean gap {gap:.4} ≥ Hoeffding bound {bound:.4}"))
+    }
+
+    /// The top-2 gap of mean votes (scaled to [0, 1]) and the bound.
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
         let t = voter.tally();
         if t.features == 0 || t.vote_cap <= 0.0 {
             return None;
         }
         let n = t.features as f64;
         let gap = (t.max - t.second) as f64 / (n * t.vote_cap as f64);
-        let bound = (2.0 * (2.0 / self.0).ln() / n).sqrt();
-        (gap >= bound).then(|| format!("mean gap {gap:.4} ≥ Hoeffding bound {bound:.4}"))
+        Some((gap, (2.0 * (2.0 / self.0).ln() / n).sqrt()))
     }
 }

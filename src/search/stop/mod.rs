@@ -26,6 +26,14 @@ pub trait StopRule: Send {
         Needs::default()
     }
 
+    /// The number the rule compares with a threshold, and that threshold,
+    /// as of the last check (for traces of the vote race); `None` for a rule
+    /// that compares no single number.
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
+        let _ = voter;
+        None
+    }
+
     /// [`check`](Self::check) with what a geometric rule needs besides the
     /// votes: the (feature, word) pairs voted so far and a way to check a
     /// candidate against them. Vote rules ignore both.

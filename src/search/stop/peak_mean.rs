@@ -30,8 +30,12 @@ struct PeakMean(f64);
 
 impl StopRule for PeakMean {
     fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
+        let (gap, threshold) = self.statistic(voter)?;
+        (gap > threshold).then(|| format!("max − mean = {gap:.4} > {threshold}"))
+    }
+
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
         let t = voter.tally();
-        let gap = t.max as f64 - t.mean();
-        (gap > self.0).then(|| format!("max − mean = {gap:.4} > {}", self.0))
+        Some((t.max as f64 - t.mean(), self.0))
     }
 }

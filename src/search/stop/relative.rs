@@ -25,12 +25,13 @@ struct Relative(f64);
 
 impl StopRule for Relative {
     fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
+        let (ratio, threshold) = self.statistic(voter)?;
+        (ratio > threshold).then(|| format!("(max − mean)/mean = {ratio:.4} > {threshold}"))
+    }
+
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
         let t = voter.tally();
         let mean = t.mean();
-        if mean <= 0.0 {
-            return None;
-        }
-        let ratio = (t.max as f64 - mean) / mean;
-        (ratio > self.0).then(|| format!("(max − mean)/mean = {ratio:.4} > {}", self.0))
+        (mean > 0.0).then(|| ((t.max as f64 - mean) / mean, self.0))
     }
 }

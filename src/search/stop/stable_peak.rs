@@ -46,4 +46,10 @@ impl StopRule for StablePeak {
         (self.leader.is_some() && held >= self.needed)
             .then(|| format!("peak unchanged for {held} features"))
     }
+
+    fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
+        self.leader?;
+        let held = voter.tally().features.saturating_sub(self.since);
+        Some((held as f64, self.needed as f64))
+    }
 }

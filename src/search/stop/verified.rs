@@ -30,6 +30,7 @@ pub const INFO: RuleInfo = RuleInfo {
             min_inliers: m as usize,
             leader: None,
             next_check: 0,
+            inliers: None,
         }))
     },
 };
@@ -46,6 +47,8 @@ struct Verified {
     leader: Option<u32>,
     /// Feature count from which the leader may be checked.
     next_check: usize,
+    /// Inliers of the leader's last check (none since it took the lead).
+    inliers: Option<usize>,
 }
 
 impl StopRule for Verified {
@@ -63,6 +66,7 @@ impl StopRule for Verified {
         if t.leader != self.leader {
             self.leader = t.leader;
             self.next_check = t.features + STABLE;
+            self.inliers = None;
         }
         let leader = self.leader?;
         let checker = leader_check?;
@@ -70,6 +74,7 @@ impl StopRule for Verified {
             return None;
         }
         let inliers = checker.inliers(leader, voted);
+        self.inliers = Some(inliers);
         if inliers >= self.min_inliers {
             return Some(format!(
                 "leader {leader} verified: {inliers} inliers ≥ {}",
@@ -78,5 +83,10 @@ impl StopRule for Verified {
         }
         self.next_check = t.features + if inliers > 0 { EVERY } else { RECHECK };
         None
+    }
+
+    /// The leader's inliers at its last check, against m.
+    fn statistic(&self, _: &dyn VoteStats) -> Option<(f64, f64)> {
+        self.inliers.map(|i| (i as f64, self.min_inliers as f64))
     }
 }
