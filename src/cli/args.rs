@@ -132,6 +132,7 @@ impl SearchArgs {
             min_features: self.min_features,
             min_score: self.min_score,
             deadline: None,
+            prior: None,
         })
     }
 }

@@ -73,6 +73,7 @@ impl AppState {
                 min_features: s.min_features,
                 min_score: s.min_score,
                 deadline: None,
+                prior: None,
             },
             max_top_n: config.limits.max_top_n,
         };
