@@ -95,7 +95,11 @@ pub struct Motion {
     /// Spread of one frame's move: in images along the route (order) or in
     /// pose units (poses). The weight of a move by d is exp(−d²/(2σ²)).
     pub sigma: f64,
-    /// Farthest one frame's move: in images (order) or pose units (poses).
+    /// Expected move per frame along the map's order, in images (order
+    /// only): 1 when the camera advances along the route about one map
+    /// image per frame, 0 when its direction is unknown.
+    pub drift: f64,
+    /// Farthest one frame's move from the expected position: in images (order) or pose units (poses).
     pub reach: f64,
     /// Chance per frame that the camera jumps anywhere in the map (kidnap,
     /// a wrong earlier frame); keeps every image possible.
@@ -106,6 +110,7 @@ impl Default for Motion {
     fn default() -> Self {
         Self {
             sigma: 1.5,
+            drift: 1.0,
             reach: 4.0,
             teleport: 0.05,
         }
@@ -117,6 +122,9 @@ impl Motion {
     pub fn check(&self) -> Result<(), String> {
         if !(self.sigma.is_finite() && self.sigma > 0.0) {
             return Err(format!("sigma must be a finite number > 0, got {}", self.sigma));
+        }
+        if !self.drift.is_finite() {
+            return Err(format!("drift must be a finite number, got {}", self.drift));
         }
         if !(self.reach.is_finite() && self.reach >= 0.0) {
             return Err(format!("reach must be a finite number ≥ 0, got {}", self.reach));
@@ -137,11 +145,11 @@ impl Motion {
         let mut out: Vec<(u32, f64)> = match topology {
             Topology::None { .. } => vec![(i, 1.0)],
             Topology::Order { images } => {
-                let r = reach.floor() as i64;
-                let lo = (i as i64 - r).max(0);
-                let hi = (i as i64 + r).min(*images as i64 - 1);
+                let centre = i as f64 + self.drift * g;
+                let lo = ((centre - reach).ceil() as i64).max(0);
+                let hi = ((centre + reach).floor() as i64).min(*images as i64 - 1);
                 (lo..=hi)
-                    .map(|j| (j as u32, weight((j - i as i64) as f64)))
+                    .map(|j| (j as u32, weight(j as f64 - centre)))
                     .collect()
             }
             Topology::Poses { positions } => match positions.get(i as usize) {
@@ -173,7 +181,10 @@ mod tests {
     #[test]
     fn order_moves_to_nearby_images_and_stays_in_the_map() {
         let t = Topology::Order { images: 10 };
-        let m = Motion::default();
+        let m = Motion {
+            drift: 0.0,
+            ..Motion::default()
+        };
         let row = m.from(&t, 0, 1);
         assert_eq!(row.iter().map(|e| e.0).collect::<Vec<_>>(), vec![0, 1, 2, 3, 4]);
         assert!((row.iter().map(|e| e.1).sum::<f64>() - 1.0).abs() < 1e-12);
@@ -183,6 +194,10 @@ mod tests {
         assert!((mid[3].1 - mid[5].1).abs() < 1e-12 && mid[4].1 > mid[3].1);
         // two frames reach twice as far
         assert_eq!(m.from(&t, 5, 2).len(), 10);
+        // moving forward: peaked one image ahead
+        let ahead = Motion::default().from(&t, 5, 1);
+        let best = ahead.iter().max_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
+        assert_eq!(best.0, 6);
     }
 
     #[test]
