@@ -323,8 +323,8 @@ impl<'m> Search<'m> {
                 let (h, touched) = (self.voter.histogram(), self.voter.touched());
                 let uniform = Prior::uniform(p.images(), p.kappa).keeping(p.keep);
                 (
-                    Some(prior::posterior(p, h, touched, p.keep)),
-                    Some(prior::posterior(&uniform, h, touched, p.keep)),
+                    Some(prior::posterior(p, h, touched, used, p.keep)),
+                    Some(prior::posterior(&uniform, h, touched, used, p.keep)),
                 )
             }
             None => (None, None),

@@ -2,13 +2,16 @@
 //!
 //! The evidence model: after t features, image j's vote h(j) (summed tf-idf
 //! votes, [`Voter::histogram`](super::Voter::histogram)) is read as a
-//! log-likelihood, log p(votes | j) = κ·h(j) + const, so
+//! log-likelihood, log p(votes | j) = κ·h(j)/√t + const = κ·√t·s(j) with
+//! s(j) = h(j)/t the mean vote per feature, so
 //!
-//! p(j | votes) ∝ prior(j) · exp(κ·h(j)).
+//! p(j | votes) ∝ prior(j) · exp(κ·h(j)/√t).
 //!
-//! Evidence grows with the features voted, so the posterior sharpens as the
-//! search goes on; κ (the evidence weight) says how much one unit of vote is
-//! worth against the prior. A prior is sparse: a few tracked images with
+//! Evidence grows like √t, as a difference of mean votes does against its
+//! standard error, so the posterior sharpens as the search goes on without
+//! the overconfidence of counting every feature as independent evidence
+//! (κ·h(j)); κ (the evidence weight) says how much that is worth against
+//! the prior. A prior is sparse: a few tracked images with
 //! their probabilities and one probability (the floor) shared by every other
 //! image, so its size follows the images tracked, not the map. A floor of 0
 //! excludes the untracked images: the search then ranks only tracked images
@@ -161,8 +164,13 @@ impl Posterior {
 /// The unnormalized log-weights of every image with a non-zero posterior
 /// that is tracked or has votes, and of the others (all with the same
 /// weight): (listed, log-weight of each other image, how many others).
-fn log_weights(prior: &Prior, hist: &[f32], touched: &[u32]) -> (Vec<(u32, f64)>, f64, usize) {
-    let k = prior.kappa;
+fn log_weights(
+    prior: &Prior,
+    hist: &[f32],
+    touched: &[u32],
+    features: usize,
+) -> (Vec<(u32, f64)>, f64, usize) {
+    let k = prior.kappa / (features.max(1) as f64).sqrt();
     let h = |j: u32| hist.get(j as usize).copied().unwrap_or(0.0) as f64;
     let mut listed: Vec<(u32, f64)> = prior
         .tracked
@@ -214,11 +222,17 @@ fn normalizer(listed: &[(u32, f64)], other: f64, others: usize) -> (f64, f64) {
     (m, z)
 }
 
-/// The posterior given the votes `hist` (images with a vote: `touched`),
-/// keeping the `keep` most probable images. Cost: the tracked images plus
-/// the touched ones, never the whole map.
-pub fn posterior(prior: &Prior, hist: &[f32], touched: &[u32], keep: usize) -> Posterior {
-    let (mut listed, other, others) = log_weights(prior, hist, touched);
+/// The posterior given the votes `hist` of `features` features (images with
+/// a vote: `touched`), keeping the `keep` most probable images. Cost: the
+/// tracked images plus the touched ones, never the whole map.
+pub fn posterior(
+    prior: &Prior,
+    hist: &[f32],
+    touched: &[u32],
+    features: usize,
+    keep: usize,
+) -> Posterior {
+    let (mut listed, other, others) = log_weights(prior, hist, touched, features);
     let (m, z) = normalizer(&listed, other, others);
     let images = prior.images;
     if z <= 0.0 || !z.is_finite() {
@@ -249,8 +263,13 @@ pub fn posterior(prior: &Prior, hist: &[f32], touched: &[u32], keep: usize) -> P
 /// The most probable image given the votes and its posterior probability
 /// (`None` before any image has weight). [`posterior`] with `keep` = 1,
 /// without sorting.
-pub fn leader(prior: &Prior, hist: &[f32], touched: &[u32]) -> Option<(u32, f64)> {
-    let (listed, other, others) = log_weights(prior, hist, touched);
+pub fn leader(
+    prior: &Prior,
+    hist: &[f32],
+    touched: &[u32],
+    features: usize,
+) -> Option<(u32, f64)> {
+    let (listed, other, others) = log_weights(prior, hist, touched, features);
     let (m, z) = normalizer(&listed, other, others);
     if z <= 0.0 || !z.is_finite() {
         return None;
@@ -292,7 +311,7 @@ mod tests {
             .map(|j| prior.of(j) * (0.7 * hist[j as usize] as f64).exp())
             .collect();
         let z: f64 = dense.iter().sum();
-        let post = posterior(&prior, &hist, &touched, 3);
+        let post = posterior(&prior, &hist, &touched, 1, 3);
         let mut want: Vec<(u32, f64)> = (0..6u32).map(|j| (j, dense[j as usize] / z)).collect();
         want.sort_by(by_weight);
         for (got, want) in post.top.iter().zip(&want) {
@@ -302,15 +321,25 @@ mod tests {
         assert_eq!(post.top.len(), 3);
         let rest: f64 = want[3..].iter().map(|e| e.1).sum();
         assert!(close(post.rest, rest));
-        let (j, p) = leader(&prior, &hist, &touched).unwrap();
+        let (j, p) = leader(&prior, &hist, &touched, 1).unwrap();
         assert_eq!((j, p), post.top[0]);
+    }
+
+    #[test]
+    fn evidence_grows_like_the_root_of_the_features() {
+        let prior = Prior::uniform(2, 1.0);
+        // the same mean votes after 4 and after 16 features
+        let p4 = leader(&prior, &[4.0, 0.0], &[0], 4).unwrap().1;
+        let p16 = leader(&prior, &[16.0, 0.0], &[0], 16).unwrap().1;
+        assert!((p4 - 1.0 / (1.0 + (-2.0f64).exp())).abs() < 1e-12);
+        assert!((p16 - 1.0 / (1.0 + (-4.0f64).exp())).abs() < 1e-12);
     }
 
     #[test]
     fn an_excluding_prior_never_ranks_excluded_images() {
         let prior = Prior::only(4, [1], 1.0);
         let hist = [9.0f32, 1.0, 0.0, 8.0];
-        let post = posterior(&prior, &hist, &[0, 1, 3], 4);
+        let post = posterior(&prior, &hist, &[0, 1, 3], 1, 4);
         assert_eq!(post.top, vec![(1, 1.0)]);
         assert_eq!(post.rest, 0.0);
     }
@@ -319,7 +348,7 @@ mod tests {
     fn large_votes_do_not_overflow() {
         let prior = Prior::uniform(3, 10.0);
         let hist = [1000.0f32, 999.0, 0.0];
-        let (j, p) = leader(&prior, &hist, &[0, 1]).unwrap();
+        let (j, p) = leader(&prior, &hist, &[0, 1], 1).unwrap();
         assert_eq!(j, 0);
         assert!(p > 0.99 && p.is_finite());
     }

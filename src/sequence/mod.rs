@@ -16,7 +16,7 @@
 //! 2. **search** with that prior ([`crate::search::SearchOptions::prior`]):
 //!    the rule `posterior` may stop once the leader's posterior is ≥ 1 − ε;
 //! 3. **update** ([`Filter::update`]): the search's posterior
-//!    p(j) ∝ b'(j)·exp(κ·h(j)) ([`crate::search::prior`]) is the new belief.
+//!    p(j) ∝ b'(j)·exp(κ·h(j)/√t) ([`crate::search::prior`]) is the new belief.
 //!
 //! A sequence restarts (uniform prior, the frame localized on its own) on
 //! its first frame, on a frame whose index is not after the previous one,
@@ -37,7 +37,8 @@ use serde::{Deserialize, Serialize};
 #[serde(deny_unknown_fields, default)]
 pub struct SequenceModel {
     pub motion: Motion,
-    /// Evidence weight κ: a frame's votes h(j) count as log-likelihood κ·h(j).
+    /// Evidence weight κ: a frame's votes h(j) after t features count as
+    /// log-likelihood κ·h(j)/√t.
     pub kappa: f64,
     /// Images the belief tracks (the others share one probability).
     pub track: usize,

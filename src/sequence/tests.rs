@@ -38,8 +38,8 @@ fn run(path: &[usize], reliable: f64, seed: u64, mut visit: impl FnMut(usize, u3
         };
         let h = votes(&mut rng, images, peak);
         let prediction = filter.predict(&model, &topology, None);
-        let post = posterior(&prediction.prior, &h, &touched, model.track);
-        let alone = posterior(&Prior::uniform(images, model.kappa), &h, &touched, 1);
+        let post = posterior(&prediction.prior, &h, &touched, 1, model.track);
+        let alone = posterior(&Prior::uniform(images, model.kappa), &h, &touched, 1, 1);
         let near = |j: u32| (j as i64 - truth as i64).abs() <= 1;
         let leader = post.leader().unwrap().0;
         filtered += near(leader) as usize;
@@ -95,7 +95,7 @@ fn out_of_order_frames_and_long_gaps_restart() {
         let p = filter.predict(&model, &topology, frame);
         let mut hist = h.clone();
         hist[20] = 20.0;
-        filter.update(posterior(&p.prior, &hist, &[20], model.track), &p);
+        filter.update(posterior(&p.prior, &hist, &[20], 1, model.track), &p);
         (p.restart, p.steps, p.prior)
     };
     assert_eq!(step(Some(5), &mut filter).0, Some(Restart::First));

@@ -1,6 +1,6 @@
 //! Rule `posterior` (ε): stop when the leader's posterior probability given
 //! the search's prior and the votes so far reaches 1 − ε
-//! ([`crate::search::prior`]: p(j | votes) ∝ prior(j)·exp(κ·h(j))).
+//! ([`crate::search::prior`]: p(j | votes) ∝ prior(j)·exp(κ·h(j)/√t)).
 //!
 //! With a sequence's prior, a frame that confirms the predicted place starts
 //! with most of the mass on it and stops after few features; a frame whose
@@ -56,7 +56,7 @@ impl StopRule for PosteriorRule {
         let prior = self
             .prior
             .get_or_insert_with(|| Arc::new(Prior::uniform(images, DEFAULT_KAPPA)));
-        let (j, p) = leader(prior, voter.histogram(), voter.touched())?;
+        let (j, p) = leader(prior, voter.histogram(), voter.touched(), t)?;
         (p >= 1.0 - self.epsilon)
             .then(|| format!("posterior of image {j} = {p:.4} ≥ 1 − {}", self.epsilon))
     }
