@@ -159,6 +159,9 @@ pub struct SequenceArgs {
     /// Map images the belief tracks.
     #[arg(long, default_value_t = SequenceModel::default().track)]
     pub track: usize,
+    /// The leader's place for the rule posterior: map images within this many ids.
+    #[arg(long, default_value_t = SequenceModel::default().window)]
+    pub window: u32,
 }
 
 impl SequenceArgs {
@@ -166,6 +169,7 @@ impl SequenceArgs {
         let m = SequenceModel {
             kappa: self.kappa,
             track: self.track,
+            window: self.window,
             motion: Motion {
                 sigma: self.motion_sigma,
                 drift: self.drift,

@@ -20,7 +20,7 @@
 use std::cmp::Ordering;
 
 /// Evidence weight κ used when none is configured (per unit of summed vote).
-pub const DEFAULT_KAPPA: f64 = 0.5;
+pub const DEFAULT_KAPPA: f64 = 2.0;
 /// Images a posterior keeps when none is configured.
 pub const DEFAULT_KEEP: usize = 64;
 
@@ -36,6 +36,10 @@ pub struct Prior {
     pub kappa: f64,
     /// Images the posterior of a search with this prior keeps.
     pub keep: usize,
+    /// Images within this many ids of the leader count as its place when
+    /// the leader's probability is read ([`leader`]): neighbours along a
+    /// route look alike and share the mass. 0: the image alone.
+    pub window: u32,
 }
 
 impl Prior {
@@ -47,6 +51,7 @@ impl Prior {
             floor: 1.0 / images.max(1) as f64,
             kappa,
             keep: DEFAULT_KEEP,
+            window: 0,
         }
     }
 
@@ -84,6 +89,7 @@ impl Prior {
             floor: floor / total,
             kappa,
             keep: DEFAULT_KEEP,
+            window: 0,
         }
     }
 
@@ -95,6 +101,12 @@ impl Prior {
     /// The same prior, its searches' posteriors keeping `keep` images.
     pub fn keeping(mut self, keep: usize) -> Self {
         self.keep = keep;
+        self
+    }
+
+    /// The same prior, the leader's place `window` ids either side.
+    pub fn with_window(mut self, window: u32) -> Self {
+        self.window = window;
         self
     }
 
@@ -260,9 +272,9 @@ pub fn posterior(
     }
 }
 
-/// The most probable image given the votes and its posterior probability
-/// (`None` before any image has weight). [`posterior`] with `keep` = 1,
-/// without sorting.
+/// The most probable image given the votes and the posterior probability of
+/// its place: the images within [`Prior::window`] ids of it (`None` before
+/// any image has weight). Costs what [`posterior`] does, without sorting.
 pub fn leader(
     prior: &Prior,
     hist: &[f32],
@@ -274,8 +286,22 @@ pub fn leader(
     if z <= 0.0 || !z.is_finite() {
         return None;
     }
-    let best = listed.iter().min_by(|a, b| by_weight(a, b))?;
-    Some((best.0, (best.1 - m).exp() / z))
+    let best = listed.iter().min_by(|a, b| by_weight(a, b))?.0;
+    let w = prior.window as i64;
+    let near = |j: u32| (j as i64 - best as i64).abs() <= w;
+    let (mut mass, mut seen) = (0.0, 0usize);
+    for e in listed.iter().filter(|e| near(e.0)) {
+        mass += (e.1 - m).exp();
+        seen += 1;
+    }
+    if others > 0 {
+        // the window's images not listed share the others' weight
+        let lo = (best as i64 - w).max(0);
+        let hi = (best as i64 + w).min(prior.images as i64 - 1);
+        let unlisted = ((hi - lo + 1) as usize).saturating_sub(seen);
+        mass += unlisted.min(others) as f64 * (other - m).exp();
+    }
+    Some((best, (mass / z).min(1.0)))
 }
 
 #[cfg(test)]
@@ -333,6 +359,20 @@ mod tests {
         let p16 = leader(&prior, &[16.0, 0.0], &[0], 16).unwrap().1;
         assert!((p4 - 1.0 / (1.0 + (-2.0f64).exp())).abs() < 1e-12);
         assert!((p16 - 1.0 / (1.0 + (-4.0f64).exp())).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_leaders_place_holds_its_neighbours_mass() {
+        let hist = [0.0f32, 5.0, 5.0, 4.9, 0.0, 0.0];
+        let alone = Prior::uniform(6, 1.0);
+        let place = Prior::uniform(6, 1.0).with_window(1);
+        let (j, p) = leader(&alone, &hist, &[1, 2, 3], 1).unwrap();
+        let (k, q) = leader(&place, &hist, &[1, 2, 3], 1).unwrap();
+        assert_eq!((j, k), (1, 1));
+        let post = posterior(&alone, &hist, &[1, 2, 3], 1, 6);
+        let mass = |ids: &[u32]| post.top.iter().filter(|e| ids.contains(&e.0)).map(|e| e.1).sum::<f64>();
+        assert!((p - mass(&[1])).abs() < 1e-12);
+        assert!((q - mass(&[0, 1, 2])).abs() < 1e-12);
     }
 
     #[test]

@@ -45,6 +45,9 @@ pub struct SequenceModel {
     /// A gap of more than this many frames between two frames restarts
     /// the sequence.
     pub max_gap: u64,
+    /// The leader's place for the rule `posterior`: the images within this
+    /// many ids of it (order topology; 0 otherwise).
+    pub window: u32,
 }
 
 impl Default for SequenceModel {
@@ -54,6 +57,7 @@ impl Default for SequenceModel {
             kappa: DEFAULT_KAPPA,
             track: DEFAULT_KEEP,
             max_gap: 10,
+            window: 2,
         }
     }
 }
@@ -164,11 +168,22 @@ impl Filter {
             (true, Some(last)) if frame - last > model.max_gap => Some(Restart::Gap),
             _ => None,
         };
-        let uniform = || Prior::uniform(images, model.kappa).keeping(model.track);
+        let window = match topology {
+            Topology::Order { .. } => model.window,
+            _ => 0,
+        };
+        let uniform = || {
+            Prior::uniform(images, model.kappa)
+                .keeping(model.track)
+                .with_window(window)
+        };
         let (prior, steps) = match (restart, &self.belief) {
             (None, Some(belief)) => {
                 let steps = frame - self.last_frame.unwrap_or(frame);
-                (predict(belief, model, topology, steps), steps)
+                (
+                    predict(belief, model, topology, steps).with_window(window),
+                    steps,
+                )
             }
             _ => {
                 self.reset();

@@ -1,5 +1,7 @@
-//! Rule `posterior` (ε): stop when the leader's posterior probability given
-//! the search's prior and the votes so far reaches 1 − ε
+//! Rule `posterior` (ε): stop when the posterior probability of the leader's
+//! place (the leader and the images within the prior's window of it along
+//! the map's order; the leader alone without one) given the search's prior
+//! and the votes so far reaches 1 − ε
 //! ([`crate::search::prior`]: p(j | votes) ∝ prior(j)·exp(κ·h(j)/√t)).
 //!
 //! With a sequence's prior, a frame that confirms the predicted place starts
@@ -25,7 +27,7 @@ pub const INFO: RuleInfo = RuleInfo {
         example: 0.01,
     }),
     grid: Grid::Values(&[0.1, 0.01, 0.001]),
-    about: "stop when the leader's posterior given the prior (a sequence's prediction, else uniform) and the votes is ≥ 1 − ε",
+    about: "stop when the posterior of the leader's place given the prior (a sequence's prediction, else uniform) and the votes is ≥ 1 − ε",
     geometric: false,
     make: |e, ctx: &RuleContext| {
         Ok(Box::new(PosteriorRule {
@@ -58,6 +60,6 @@ impl StopRule for PosteriorRule {
             .get_or_insert_with(|| Arc::new(Prior::uniform(images, DEFAULT_KAPPA)));
         let (j, p) = leader(prior, voter.histogram(), voter.touched(), t)?;
         (p >= 1.0 - self.epsilon)
-            .then(|| format!("posterior of image {j} = {p:.4} ≥ 1 − {}", self.epsilon))
+            .then(|| format!("posterior of image {j}'s place = {p:.4} ≥ 1 − {}", self.epsilon))
     }
 }
