@@ -81,6 +81,9 @@ pub struct SearchArgs {
     /// m of rule verified: the inliers that verify the leader.
     #[arg(long)]
     pub inliers: Option<f64>,
+    /// ε of rule posterior: the probability left to places other than the leader's.
+    #[arg(long)]
+    pub epsilon: Option<f64>,
     /// Candidates to return.
     #[arg(long, default_value_t = SearchOptions::recommended().top_n)]
     pub top_n: usize,
@@ -106,6 +109,7 @@ impl SearchArgs {
             ("delta", self.delta),
             ("fraction", self.fraction),
             ("inliers", self.inliers),
+            ("epsilon", self.epsilon),
         ]
         .into_iter()
         .filter_map(|(n, v)| v.map(|v| (n, v)))

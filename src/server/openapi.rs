@@ -7,7 +7,7 @@ use super::errors::{ErrorBody, ErrorDetail};
 use super::localize::{self, ImageUpload};
 use super::status::{self, MapInfo, Status};
 use crate::report::{
-    Candidate, FeatureUse, ImageSize, Localization, MapIdentity, RuleReport, Timings,
+    Candidate, FeatureUse, FilteredCandidate, SequenceAnswer, ImageSize, Localization, MapIdentity, RuleReport, Timings,
 };
 use crate::search::StopInfo;
 use crate::search::stop::{RULES, rule_names};
@@ -26,6 +26,7 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
     ),
     paths(
         localize::localize,
+        localize::delete_sequence,
         status::healthz,
         status::readyz,
         status::map,
@@ -35,6 +36,7 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
     components(schemas(
         Localization, Candidate, FeatureUse, RuleReport, StopInfo, ImageSize, Timings,
         MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload, Binary,
+        SequenceAnswer, FilteredCandidate,
     )),
     tags(
         (name = "localize", description = "Localize a query image against the loaded map."),

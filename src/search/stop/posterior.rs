@@ -22,11 +22,11 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "posterior",
     parameter: Some(Parameter {
         name: "epsilon",
-        meaning: "ε, the posterior probability left to the other images",
+        meaning: "ε, the posterior probability left to places other than the leader's",
         range: Range::Open01,
-        example: 0.01,
+        example: 0.7,
     }),
-    grid: Grid::Values(&[0.1, 0.01, 0.001]),
+    grid: Grid::Values(&[0.7, 0.5, 0.1]),
     about: "stop when the posterior of the leader's place given the prior (a sequence's prediction, else uniform) and the votes is ≥ 1 − ε",
     geometric: false,
     make: |e, ctx: &RuleContext| {
