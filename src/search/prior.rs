@@ -260,10 +260,12 @@ pub fn posterior(
     }
     listed.truncate(keep);
     listed.sort_unstable_by(by_weight);
-    let top: Vec<(u32, f64)> = listed
+    let mut top: Vec<(u32, f64)> = listed
         .into_iter()
         .map(|(j, w)| (j, (w - m).exp() / z))
         .collect();
+    // the collect reuses the buffer of every listed image: keep `keep`
+    top.shrink_to_fit();
     let kept: f64 = top.iter().map(|e| e.1).sum();
     Posterior {
         top,
