@@ -4,10 +4,11 @@
 set -euo pipefail
 # fonts-dejavu-core: the TrueType font `bowloc eval` draws its plots' text with.
 # python3-venv: scripts/schemathesis.sh installs schemathesis into a virtualenv.
-# wrk: the load scripts (scripts/load.sh, scripts/overload.sh).
+# wrk: the load scripts (scripts/load.sh, scripts/overload.sh, scripts/replicas.sh).
+# haproxy: the load balancer in front of the replicas of scripts/replicas.sh.
 # pkg-config: how the `opencv` crate finds OpenCV's headers and libraries.
 packages=(libopencv-dev pkg-config clang libclang-dev curl jq make ca-certificates fonts-dejavu-core
-  python3 python3-venv wrk)
+  python3 python3-venv wrk haproxy)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -7,7 +7,8 @@
 //! - [`features`] — decode and extract: image bytes to SIFT/RootSIFT
 //!   descriptors. The only module that touches OpenCV.
 //! - [`search`] — permute, vote, stop and rank: the early-stopping search over
-//!   plain arrays, with the stopping rules in [`search::stop`].
+//!   plain arrays, with the stopping rules in [`search::stop`]; the same
+//!   search over a map split into shards in [`search::shard`].
 //! - [`quantize`] — descriptor → nearest visual word, batched through a
 //!   matrix multiply.
 //! - [`vocabulary`] — the visual words (k-means centroids) and their training.

@@ -1,11 +1,13 @@
 # Shared by the scripts that drive a real `bowloc serve` on loopback
-# (load.sh, overload.sh, schemathesis.sh). Source it from the repository's
+# (load.sh, overload.sh, replicas.sh, schemathesis.sh). Source it from the repository's
 # root:  . scripts/lib/server.sh
 #
 #   load_map                 the rtabmap-loop map (K = 1000) in data/load/,
 #                            built on first use
-#   start_server CONFIG LOG  start the server, wait for /readyz; sets
-#                            SERVER_PID and SERVER_ADDR (127.0.0.1:PORT)
+#   start_server CONFIG LOG [FLAG…]
+#                            start the server (with these flags of `serve`),
+#                            wait for /readyz; sets SERVER_PID and
+#                            SERVER_ADDR (127.0.0.1:PORT)
 #   stop_server              SIGTERM, then wait for it to exit
 #   server_rss_kib           the server's resident memory in KiB
 #   gardens_map K            the gardens-point map (K words) in
@@ -35,7 +37,7 @@ load_map() {
 }
 
 start_server() {
-  "$BOWLOC_BIN" serve --config "$1" >"$2" 2>&1 &
+  "$BOWLOC_BIN" serve --config "$1" "${@:3}" >"$2" 2>&1 &
   SERVER_PID=$!
   SERVER_ADDR=""
   local _

@@ -299,3 +299,27 @@ impl VerifyArgs {
         Ok(p)
     }
 }
+
+/// `--vocab-seeds`: N (k-means seeds 1..=N) or a list of seeds, a seed
+/// repeated counting once (`7,7` is seed 7 alone).
+pub fn vocab_seeds(given: &[u64]) -> Vec<u64> {
+    match given {
+        [n] => (1..=*n).collect(),
+        list => list.iter().fold(Vec::new(), |mut seeds, &s| {
+            if !seeds.contains(&s) {
+                seeds.push(s);
+            }
+            seeds
+        }),
+    }
+}
+
+/// A dataset folder's name (the last component of its canonical path), for
+/// default output and cache folders.
+pub fn dataset_name(dataset: &std::path::Path) -> String {
+    dataset
+        .canonicalize()
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "dataset".into())
+}

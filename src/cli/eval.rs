@@ -1,7 +1,7 @@
 //! `bowloc eval`: reproduce the paper's evaluation on a dataset in the shared
 //! layout (tables, CSV, JSON and plots in `--out`).
 
-use super::args::{ExtractArgs, SequenceArgs, VerifyArgs};
+use super::args::{ExtractArgs, SequenceArgs, VerifyArgs, dataset_name, vocab_seeds};
 use bowloc::eval::machine::OpenCvInfo;
 use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig, Warmup};
 use bowloc::features::TileGrid;
@@ -54,8 +54,9 @@ pub struct EvalArgs {
     /// Skip the PNG/SVG figures.
     #[arg(long)]
     no_plots: bool,
-    /// The queries' tile grid for streaming extraction, COLSxROWS[+MARGIN]
-    /// (1x1: whole images). The full search also runs on whole queries.
+    /// The queries' tile grid for streaming extraction,
+    /// COLSxROWS[+MARGIN][,coarse] (1x1: whole images; `,coarse`: a half-size
+    /// pass first). The full search also runs on whole queries.
     #[arg(long, default_value = "2x2+24")]
     tiles: TileGrid,
     #[command(flatten)]
@@ -83,21 +84,8 @@ pub struct EvalArgs {
 }
 
 pub fn run(a: EvalArgs) -> anyhow::Result<()> {
-    let name = a
-        .dataset
-        .canonicalize()
-        .ok()
-        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .unwrap_or_else(|| "dataset".into());
-    let seeds = match a.vocab_seeds.as_slice() {
-        [n] => (1..=*n).collect(),
-        list => list.iter().fold(Vec::new(), |mut seeds, &s| {
-            if !seeds.contains(&s) {
-                seeds.push(s);
-            }
-            seeds
-        }),
-    };
+    let name = dataset_name(&a.dataset);
+    let seeds = vocab_seeds(&a.vocab_seeds);
     if a.sequence {
         return sequence(a, name, seeds);
     }

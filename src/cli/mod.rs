@@ -7,6 +7,7 @@ mod healthcheck;
 mod map;
 mod query;
 mod serve;
+mod shards;
 mod vocab;
 
 use bowloc::server::config::LogFormat;
@@ -40,6 +41,9 @@ enum Command {
     Query(query::QueryArgs),
     /// Evaluate the stopping rules on a dataset (the paper's tables and plots).
     Eval(Box<eval::EvalArgs>),
+    /// Simulate the search on a map split into shards: same answers as one
+    /// machine, and the messages per query (docs/scale.md).
+    Shards(shards::ShardsArgs),
     /// Choose stopping-rule parameters for a map without ground truth.
     Calibrate(calibrate::CalibrateArgs),
     /// Serve localization over HTTP (see config/default.toml).
@@ -96,6 +100,7 @@ pub fn run() -> ExitCode {
                 Command::Map(c) => map::run(c),
                 Command::Query(a) => query::run(a),
                 Command::Eval(a) => eval::run(*a),
+                Command::Shards(a) => shards::run(a),
                 Command::Calibrate(a) => calibrate::run(a),
                 Command::Openapi => serve::print_openapi(),
                 Command::Rules => {

@@ -21,7 +21,8 @@
 //!
 //! [`sequence`] is the other evaluation (`bowloc eval --sequence`): the
 //! queries replayed in order as one camera's frames, with and without the
-//! sequence filter, on the same caches.
+//! sequence filter, on the same caches. [`shards`] replays the same queries
+//! on a map split into shards (`bowloc shards`).
 
 pub mod cache;
 pub mod equal_recall;
@@ -30,6 +31,7 @@ pub mod metrics;
 pub mod plots;
 pub mod recommend;
 pub mod sequence;
+pub mod shards;
 pub mod summary;
 pub mod sweep;
 pub mod table;
@@ -472,6 +474,24 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             )
         })
         .transpose()?;
+    if config.tiles.coarse {
+        let (coarse, all) = query_desc
+            .meta()
+            .tiles
+            .iter()
+            .fold((0u64, 0u64), |(c, a), t| {
+                let first = t.first().map_or(0, |t| t.features as u64);
+                (
+                    c + first,
+                    a + t.iter().map(|t| t.features as u64).sum::<u64>(),
+                )
+            });
+        tracing::info!(
+            "coarse pass: {:.3} of the queries' keypoints (the search assumes {} before counting)",
+            coarse as f64 / all.max(1) as f64,
+            TileGrid::COARSE_SHARE
+        );
+    }
     stages.extract_s = seconds_since(&mut clock);
     let machine = MachineInfo::here(config.opencv.clone(), map_desc.hash(), query_desc.hash());
     let counts: Vec<usize> = (0..query_desc.len())

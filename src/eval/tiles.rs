@@ -12,7 +12,8 @@ use crate::index::MapIndex;
 use crate::search::{self, Ranked, SearchOptions, SearchOutcome, permute};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
-use std::time::Instant;
+use cpu_time::ThreadTime;
+use std::time::Duration;
 
 /// One tile of a cached query, in grid order.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -36,6 +37,8 @@ pub struct Query {
     /// Empty: the whole image as one tile that cost nothing to extract.
     pub tiles: Vec<Tile>,
     pub fixed_ms: f32,
+    /// Tile 0 is a coarse pass, extracted first ([`crate::features::TileGrid::coarse`]).
+    pub coarse_first: bool,
     /// How to verify it geometrically (the `verified` stop and re-ranking).
     pub geometry: Option<Arc<Geometry>>,
 }
@@ -54,7 +57,7 @@ pub struct Replay {
     /// Decoding and extracting them, in milliseconds.
     pub extract_ms: f64,
     /// Checking the leader during the search and verifying the candidates
-    /// after it, in milliseconds.
+    /// after it, in milliseconds of the thread's CPU time.
     pub verify_ms: f64,
     /// The best candidate is geometrically verified.
     pub verified: bool,
@@ -69,53 +72,67 @@ impl Query {
         }
     }
 
+    /// The tiles in the order the service extracts them for `seed`: their
+    /// numbers in grid order, and each one's features as a span of
+    /// [`words`](Self::words) with the share of the image it covers. A query
+    /// without tiles is one tile, the whole image.
+    pub fn tile_order(&self, seed: u64) -> (Vec<usize>, Vec<(usize, usize, f64)>) {
+        if self.tiles.is_empty() {
+            return (vec![0], vec![(0, self.words.len(), 1.0)]);
+        }
+        let mut starts = Vec::with_capacity(self.tiles.len() + 1);
+        starts.push(0usize);
+        for t in &self.tiles {
+            starts.push(starts.last().unwrap() + t.features as usize);
+        }
+        let order: Vec<usize> = if self.tiles.len() == 1 {
+            vec![0]
+        } else {
+            permute::tile_order(self.tiles.len(), self.coarse_first, seed)
+                .into_iter()
+                .map(|t| t as usize)
+                .collect()
+        };
+        let spans = order
+            .iter()
+            .map(|&t| (starts[t], starts[t + 1], self.tiles[t].area as f64))
+            .collect();
+        (order, spans)
+    }
+
+    /// The words of each span of [`tile_order`](Self::tile_order), with its share of the image.
+    pub fn batches(&self, spans: &[(usize, usize, f64)]) -> Vec<(&[u32], f64)> {
+        spans
+            .iter()
+            .map(|&(a, b, area)| (&self.words[a..b], area))
+            .collect()
+    }
+
     /// Search as the service does with streaming extraction: tiles in the
     /// order drawn from the options' seed, each tile's words fed in a random
     /// order, no tile extracted after the search stops; with `verify`, the
     /// candidates re-ranked by geometric verification afterwards. A rule
     /// that verifies its leader (`verified`) does so with [`Query::geometry`].
     pub fn search(&self, map: &MapIndex, options: &SearchOptions, verify: bool) -> Replay {
-        let whole = [Tile {
-            features: self.words.len() as u32,
-            area: 1.0,
-            ms: 0.0,
-        }];
-        let tiles: &[Tile] = if self.tiles.is_empty() {
-            &whole
-        } else {
-            &self.tiles
-        };
-        let mut starts = Vec::with_capacity(tiles.len() + 1);
-        starts.push(0usize);
-        for t in tiles {
-            starts.push(starts.last().unwrap() + t.features as usize);
-        }
-        let order: Vec<usize> = if tiles.len() == 1 {
-            vec![0]
-        } else {
-            permute::tile_order(tiles.len(), options.seed)
-                .into_iter()
-                .map(|t| t as usize)
-                .collect()
-        };
-        let batches: Vec<(&[u32], f64)> = order
-            .iter()
-            .map(|&t| (&self.words[starts[t]..starts[t + 1]], tiles[t].area as f64))
-            .collect();
+        let (order, spans) = self.tile_order(options.seed);
+        let batches = self.batches(&spans);
         // keypoints in the order the features are given to the search
         let fed_keypoints: Vec<Keypoint> = if self.keypoints.len() == self.words.len() {
-            order
+            spans
                 .iter()
-                .flat_map(|&t| self.keypoints[starts[t]..starts[t + 1]].iter().copied())
+                .flat_map(|&(a, b, _)| self.keypoints[a..b].iter().copied())
                 .collect()
         } else {
             Vec::new()
         };
-        let mut check = self.geometry.as_ref().map(|g| LeaderVerifier {
-            map,
-            fit: &*g.fit,
-            params: &g.params,
-            keypoints: &fed_keypoints,
+        let mut check = self.geometry.as_ref().map(|g| CpuTimed {
+            inner: LeaderVerifier {
+                map,
+                fit: &*g.fit,
+                params: &g.params,
+                keypoints: &fed_keypoints,
+            },
+            spent: Duration::ZERO,
         });
         let (mut outcome, voted, used) = search::search_tiles(
             map,
@@ -123,10 +140,10 @@ impl Query {
             options,
             check.as_mut().map(|c| c as &mut dyn search::LeaderCheck),
         );
-        let mut verify_ms = outcome.timings.verify.as_secs_f64() * 1e3;
+        let mut verify_ms = check.map_or(0.0, |c| c.spent.as_secs_f64() * 1e3);
         let mut verified = false;
         if verify && let Some(g) = &self.geometry {
-            let started = Instant::now();
+            let started = ThreadTime::now();
             let votes: Vec<(u32, f32)> =
                 outcome.candidates.iter().map(|r| (r.id, r.score)).collect();
             let reranked: Vec<Reranked> = rerank(
@@ -152,7 +169,7 @@ impl Query {
         let extract_ms = self.fixed_ms as f64
             + order[..used]
                 .iter()
-                .map(|&t| tiles[t].ms as f64)
+                .map(|&t| self.tiles.get(t).map_or(0.0, |t| t.ms as f64))
                 .sum::<f64>();
         Replay {
             outcome,
@@ -161,6 +178,23 @@ impl Query {
             verify_ms,
             verified,
         }
+    }
+}
+
+/// A leader check timed by the thread's CPU time, as the cache times
+/// extraction (the search's own clock is the wall clock, which on a busy
+/// machine charges for waiting too).
+struct CpuTimed<C> {
+    inner: C,
+    spent: Duration,
+}
+
+impl<C: search::LeaderCheck> search::LeaderCheck for CpuTimed<C> {
+    fn inliers(&mut self, image: u32, voted: &[(u32, u32)]) -> usize {
+        let started = ThreadTime::now();
+        let inliers = self.inner.inliers(image, voted);
+        self.spent += started.elapsed();
+        inliers
     }
 }
 

@@ -12,6 +12,8 @@
 //!   extracts no more batches;
 //! - [`rank`]: top-n images with scores comparable across stop points.
 //!
+//! [`shard`] runs the same search over a map split into shards by image.
+//!
 //! [`Search`] is the streaming driver; [`search`] and [`search_words`] run it
 //! on one batch whose size is known up front. Pure Rust over plain arrays: no
 //! OpenCV, no HTTP.
@@ -19,13 +21,14 @@
 pub mod permute;
 pub mod prior;
 pub mod rank;
+pub mod shard;
 pub mod stop;
 pub mod vote;
 
 pub use prior::{Posterior, Prior};
 pub use rank::Ranked;
 pub use stop::{LeaderCheck, RuleSpec, StopRule};
-pub use vote::{Needs, Tally, Voter};
+pub use vote::{Needs, Tally, VoteStats, Voter};
 
 use crate::index::MapIndex;
 use crate::quantize::Quantizer;

@@ -4,7 +4,7 @@
 //! query's feature count is known.
 
 use super::prior::Prior;
-use super::vote::Voter;
+use super::vote::{VoteStats, Voter};
 
 /// One ranked map image.
 #[derive(Debug, Clone, Copy, PartialEq)]

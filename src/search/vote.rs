@@ -5,6 +5,10 @@
 //! Votes are not divided by N: with streaming extraction N is not known until
 //! the last tile, and nothing here needs it. The cost of a vote is the length
 //! of w's posting list; nothing scans the whole map.
+//!
+//! The rules read the statistics through [`VoteStats`], which the voter
+//! implements; a search over a map split into shards implements it too, from
+//! the statistics each shard reports ([`super::shard`]).
 
 use crate::index::{MapView, Postings};
 
@@ -66,6 +70,43 @@ pub struct Needs {
     pub top: usize,
     /// Per-image sums of squared per-feature votes.
     pub squares: bool,
+    /// [`VoteStats::best_outside`] (read only once N is known).
+    pub outside: bool,
+}
+
+/// What a stopping rule may read of the votes so far: the running tally, the
+/// leading images, and bounds on what the features left can still change.
+/// The [`Voter`] answers from its histogram; a sharded search answers from
+/// the statistics its shards report, with the same values.
+pub trait VoteStats {
+    /// Running statistics of the histogram.
+    fn tally(&self) -> &Tally;
+
+    /// The leading images, best first: (h, id). Holds `Needs::top` entries
+    /// (fewer while fewer images have votes).
+    fn top(&self) -> &[(f32, u32)];
+
+    /// Σ v² of image `j`'s per-feature votes (needs `Needs::squares`; asked
+    /// only of the leader).
+    fn squares_of(&self, j: u32) -> f32;
+
+    /// The largest Σ v² of any image other than `j` (needs `Needs::squares`).
+    fn max_squares_except(&self, j: u32) -> f32;
+
+    /// Upper bound on what one more feature can add to h(j).
+    fn image_vote_cap(&self, j: u32) -> f32;
+
+    /// The most an image outside the first `n` of [`top`](Self::top) can
+    /// reach with `left` more features: max of h(j) + left·cap_j over the
+    /// images with votes, and left × the map's largest cap when some image
+    /// has none (needs `Needs::outside`). Scans the images with votes.
+    fn best_outside(&self, n: usize, left: f32) -> f32;
+
+    /// The whole histogram h and the images with a vote, when this view
+    /// holds them (the [`Voter`] does; a sharded search does not).
+    fn histogram_and_touched(&self) -> Option<(&[f32], &[u32])> {
+        None
+    }
 }
 
 /// The k highest values of a histogram whose entries only grow, kept in
@@ -219,10 +260,6 @@ impl<'a> Voter<'a> {
         }
     }
 
-    pub fn tally(&self) -> &Tally {
-        &self.tally
-    }
-
     /// The raw histogram h.
     pub fn histogram(&self) -> &[f32] {
         &self.hist
@@ -233,22 +270,35 @@ impl<'a> Voter<'a> {
         &self.touched
     }
 
-    /// The leading images, best first: (h, id). Holds `Needs::top` entries
-    /// (fewer while fewer images have votes).
-    pub fn top(&self) -> &[(f32, u32)] {
+    /// Take `cap` as the largest vote one feature can give any image (the
+    /// tally's `vote_cap`): a shard of a larger map bounds the images it has
+    /// not voted for with the whole map's cap, as the whole map would.
+    pub fn set_vote_cap(&mut self, cap: f32) {
+        self.tally.vote_cap = cap;
+    }
+}
+
+impl VoteStats for Voter<'_> {
+    fn tally(&self) -> &Tally {
+        &self.tally
+    }
+
+    fn histogram_and_touched(&self) -> Option<(&[f32], &[u32])> {
+        Some((&self.hist, &self.touched))
+    }
+
+    fn top(&self) -> &[(f32, u32)] {
         self.top.items()
     }
 
-    /// Σ v² of image `j`'s per-feature votes (0 unless `Needs::squares`).
-    pub fn squares_of(&self, j: u32) -> f32 {
+    fn squares_of(&self, j: u32) -> f32 {
         self.squares
             .as_ref()
             .and_then(|(sq, _)| sq.get(j as usize).copied())
             .unwrap_or(0.0)
     }
 
-    /// The largest Σ v² of any image other than `j` (0 unless `Needs::squares`).
-    pub fn max_squares_except(&self, j: u32) -> f32 {
+    fn max_squares_except(&self, j: u32) -> f32 {
         let Some((_, top)) = &self.squares else {
             return 0.0;
         };
@@ -258,9 +308,23 @@ impl<'a> Voter<'a> {
             .map_or(0.0, |e| e.0)
     }
 
-    /// Upper bound on what one more feature can add to h(j).
-    pub fn image_vote_cap(&self, j: u32) -> f32 {
+    fn image_vote_cap(&self, j: u32) -> f32 {
         self.image_max.get(j as usize).copied().unwrap_or(0.0)
+    }
+
+    fn best_outside(&self, n: usize, left: f32) -> f32 {
+        let top = self.top.items();
+        let leaders = &top[..n.min(top.len())];
+        let untouched = if self.touched.len() < self.tally.images {
+            left * self.tally.vote_cap
+        } else {
+            0.0
+        };
+        self.touched
+            .iter()
+            .filter(|&&j| !leaders.iter().any(|e| e.1 == j))
+            .map(|&j| self.hist[j as usize] + left * self.image_vote_cap(j))
+            .fold(untouched, f32::max)
     }
 }
 
@@ -282,6 +346,7 @@ mod tests {
         let needs = Needs {
             top: 3,
             squares: true,
+            outside: true,
         };
         let mut voter = Voter::with_needs(&view, needs);
         let mut squares = [0f32; 5];
@@ -322,6 +387,23 @@ mod tests {
                     .map(|i| squares[i as usize])
                     .fold(0.0f32, f32::max);
                 assert!((voter.max_squares_except(j) - other).abs() < 1e-7);
+            }
+            // best_outside: every image outside the first k leaders, by brute force
+            for k in 0..=3 {
+                let left = 2.0;
+                let leaders: Vec<u32> = voter.top().iter().take(k).map(|e| e.1).collect();
+                let want = (0..5u32)
+                    .filter(|j| !leaders.contains(j))
+                    .map(|j| {
+                        let cap = if h[j as usize] > 0.0 {
+                            voter.image_vote_cap(j)
+                        } else {
+                            t.vote_cap
+                        };
+                        h[j as usize] + left * cap
+                    })
+                    .fold(0.0f32, f32::max);
+                assert_eq!(voter.best_outside(k, left), want);
             }
         }
         assert_eq!(voter.tally().features, stream.len());

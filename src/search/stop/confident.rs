@@ -34,7 +34,7 @@
 //! often the weaker of the two: `docs/results.md` measures both.
 
 use super::{Grid, Parameter, Range, RuleInfo, StopRule};
-use crate::search::vote::{Needs, Voter};
+use crate::search::vote::{Needs, VoteStats};
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "confident",
@@ -80,10 +80,11 @@ impl StopRule for Confident {
         Needs {
             top: 2,
             squares: true,
+            ..Needs::default()
         }
     }
 
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let tally = voter.tally();
         let (t, images) = (tally.features, tally.images);
         let leader = tally.leader?;

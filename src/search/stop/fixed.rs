@@ -3,7 +3,7 @@
 //! count N is unknown (tiles left to extract) the fraction is of its estimate.
 
 use super::{Grid, Parameter, Range, RuleInfo, StopRule};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "fixed",
@@ -22,7 +22,7 @@ pub const INFO: RuleInfo = RuleInfo {
 struct Fixed(f64);
 
 impl StopRule for Fixed {
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let t = voter.tally();
         let needed = (self.0 * t.total_or_estimate()).ceil() as usize;
         (t.features >= needed.max(1)).then(|| format!("fixed fraction {} reached", self.0))

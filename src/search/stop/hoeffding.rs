@@ -3,7 +3,7 @@
 //! reaches √(2·ln(2/δ)/t), Hoeffding's bound on two means of t samples each.
 
 use super::{Grid, Parameter, Range, RuleInfo, StopRule};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "hoeffding",
@@ -22,7 +22,7 @@ pub const INFO: RuleInfo = RuleInfo {
 struct Hoeffding(f64);
 
 impl StopRule for Hoeffding {
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let t = voter.tally();
         if t.features == 0 || t.vote_cap <= 0.0 {
             return None;

@@ -19,7 +19,7 @@
 //! own caps, and at most once every [`SCAN_EVERY`] features.
 
 use super::{Grid, RuleContext, RuleInfo, StopRule};
-use crate::search::vote::{Needs, Voter};
+use crate::search::vote::{Needs, VoteStats};
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "lossless",
@@ -50,10 +50,11 @@ impl StopRule for Lossless {
         Needs {
             top: self.n + 1,
             squares: false,
+            outside: true,
         }
     }
 
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let t = voter.tally();
         let left = t.remaining()? as f32;
         let top = voter.top();
@@ -84,20 +85,8 @@ impl StopRule for Lossless {
             return None;
         }
         self.next_scan = t.features + SCAN_EVERY;
-        let h = voter.histogram();
-        let in_top = |j: u32| top[..n].iter().any(|e| e.1 == j);
-        // images without votes can reach at most left·(largest cap)
-        let untouched_best = if voter.touched().len() < t.images {
-            left * t.vote_cap
-        } else {
-            0.0
-        };
-        let best_other = voter
-            .touched()
-            .iter()
-            .filter(|&&j| !in_top(j))
-            .map(|&j| h[j as usize] + left * voter.image_vote_cap(j))
-            .fold(untouched_best, f32::max);
+        // every image outside the top n with its own cap
+        let best_other = voter.best_outside(n, left);
         (last > best_other + slack)
             .then(|| format!("top {n} final: {left} features left cannot change it (exact bounds)"))
     }

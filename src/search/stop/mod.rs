@@ -15,14 +15,14 @@ mod stable_peak;
 mod verified;
 
 use super::prior::Prior;
-use super::vote::{Needs, Voter};
+use super::vote::{Needs, VoteStats};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
 /// A rule instance for one query.
 pub trait StopRule: Send {
     /// Called after each feature's vote; `Some(why)` stops the search.
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String>;
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String>;
 
     /// What the voter must track for this rule.
     fn needs(&self) -> Needs {
@@ -34,7 +34,7 @@ pub trait StopRule: Send {
     /// candidate against them. Vote rules ignore both.
     fn check_with(
         &mut self,
-        voter: &Voter<'_>,
+        voter: &dyn VoteStats,
         voted: &[(u32, u32)],
         leader_check: Option<&mut dyn LeaderCheck>,
     ) -> Option<String> {

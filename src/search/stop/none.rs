@@ -1,7 +1,7 @@
 //! Rule `none`: never stop early (full bag-of-words).
 
 use super::{Grid, RuleInfo, StopRule};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "none",
@@ -15,7 +15,7 @@ pub const INFO: RuleInfo = RuleInfo {
 struct NoStop;
 
 impl StopRule for NoStop {
-    fn check(&mut self, _: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, _: &dyn VoteStats) -> Option<String> {
         None
     }
 }

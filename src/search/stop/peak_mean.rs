@@ -6,7 +6,7 @@
 //! paper threshold T′ corresponds to T = T′·N.
 
 use super::{Grid, Parameter, Range, RuleInfo, StopRule};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "peak-mean",
@@ -29,7 +29,7 @@ pub const INFO: RuleInfo = RuleInfo {
 struct PeakMean(f64);
 
 impl StopRule for PeakMean {
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let t = voter.tally();
         let gap = t.max as f64 - t.mean();
         (gap > self.0).then(|| format!("max − mean = {gap:.4} > {}", self.0))

@@ -11,11 +11,12 @@
 //! [`DEFAULT_KAPPA`](crate::search::prior::DEFAULT_KAPPA)) and the rule reads
 //! the votes alone. The posterior costs the tracked images plus the images
 //! with votes, so it is computed once every [`CHECK_EVERY`] features: the
-//! stop comes at most that many features late.
+//! stop comes at most that many features late. It needs the whole
+//! histogram, so on a sharded map it never stops (the full search).
 
 use super::{Grid, Parameter, Range, RuleContext, RuleInfo, StopRule};
 use crate::search::prior::{DEFAULT_KAPPA, Prior, leader};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 use std::sync::Arc;
 
 pub const INFO: RuleInfo = RuleInfo {
@@ -48,17 +49,19 @@ struct PosteriorRule {
 }
 
 impl StopRule for PosteriorRule {
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let t = voter.tally().features;
         if t < self.next {
             return None;
         }
         self.next = t + CHECK_EVERY;
-        let images = voter.histogram().len();
+        // a view without the whole histogram (a sharded search) never stops
+        let (hist, touched) = voter.histogram_and_touched()?;
+        let images = hist.len();
         let prior = self
             .prior
             .get_or_insert_with(|| Arc::new(Prior::uniform(images, DEFAULT_KAPPA)));
-        let (j, p) = leader(prior, voter.histogram(), voter.touched(), t)?;
+        let (j, p) = leader(prior, hist, touched, t)?;
         (p >= 1.0 - self.epsilon)
             .then(|| format!("posterior of image {j}'s place = {p:.4} ≥ 1 − {}", self.epsilon))
     }

@@ -1,7 +1,7 @@
 //! Rule 2 (`relative`): stop when (max(h) − mean(h)) / mean(h) > T.
 
 use super::{Grid, Parameter, Range, RuleInfo, StopRule};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "relative",
@@ -24,7 +24,7 @@ pub const INFO: RuleInfo = RuleInfo {
 struct Relative(f64);
 
 impl StopRule for Relative {
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let t = voter.tally();
         let mean = t.mean();
         if mean <= 0.0 {

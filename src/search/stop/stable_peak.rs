@@ -2,7 +2,7 @@
 //! consecutive features.
 
 use super::{Grid, Parameter, Range, RuleInfo, StopRule};
-use crate::search::vote::Voter;
+use crate::search::vote::VoteStats;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "stable-peak",
@@ -36,7 +36,7 @@ struct StablePeak {
 }
 
 impl StopRule for StablePeak {
-    fn check(&mut self, voter: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, voter: &dyn VoteStats) -> Option<String> {
         let t = voter.tally();
         if t.leader != self.leader {
             self.leader = t.leader;

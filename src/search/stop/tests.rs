@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::index::{ImageWords, MapBuilder, MapIndex};
-use crate::search::vote::{Needs, Voter};
+use crate::search::vote::{Needs, VoteStats, Voter};
 
 fn one_word_per_image() -> MapIndex {
     let mut b = MapBuilder::new(4);
@@ -116,7 +116,7 @@ fn lossless_orders_the_whole_top_n() {
         &view,
         Needs {
             top: 3,
-            squares: false,
+            ..Needs::default()
         },
     );
     voter.set_total(stream.len());

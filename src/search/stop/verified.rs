@@ -12,7 +12,7 @@
 //! lead for [`STABLE`] features, at most once every [`EVERY`] features; a
 //! leader that failed is checked again only after [`RECHECK`] more features.
 
-use super::{Grid, LeaderCheck, Parameter, Range, RuleInfo, StopRule, Voter};
+use super::{Grid, LeaderCheck, Parameter, Range, RuleInfo, StopRule, VoteStats};
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "verified",
@@ -49,13 +49,13 @@ struct Verified {
 }
 
 impl StopRule for Verified {
-    fn check(&mut self, _: &Voter<'_>) -> Option<String> {
+    fn check(&mut self, _: &dyn VoteStats) -> Option<String> {
         None
     }
 
     fn check_with(
         &mut self,
-        voter: &Voter<'_>,
+        voter: &dyn VoteStats,
         voted: &[(u32, u32)],
         leader_check: Option<&mut dyn LeaderCheck>,
     ) -> Option<String> {

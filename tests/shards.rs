@@ -1,0 +1,40 @@
+//! End to end: `bowloc shards` on the real rtabmap-loop dataset (a small
+//! vocabulary, one random order): every vote-only rule answers on 2 and 8
+//! shards exactly as on one machine, and the messages are printed.
+
+mod common;
+
+use std::process::Command;
+
+#[test]
+fn sharded_search_answers_as_one_machine_on_real_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let output = Command::new(env!("CARGO_BIN_EXE_bowloc"))
+        .arg("shards")
+        .arg("--dataset")
+        .arg(common::dataset("rtabmap-loop"))
+        .arg("--cache")
+        .arg(dir.path())
+        .args(["--words", "200", "--vocab-seeds", "1", "--runs", "1"])
+        .args(["--shards", "2,8", "--log", "warn"])
+        .output()
+        .expect("bowloc runs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        output.status.success(),
+        "bowloc shards failed:\n{stdout}\n{stderr}"
+    );
+    // 44 queries × 9 settings × 2 shard counts
+    assert!(
+        stdout.contains("rtabmap-loop: 0 of 792 sharded searches differ"),
+        "{stdout}"
+    );
+    for setting in [
+        "| none | 2 |",
+        "| lossless | 8 |",
+        "| relative 2.5 w=100 | 8 |",
+    ] {
+        assert!(stdout.contains(setting), "{setting} missing:\n{stdout}");
+    }
+}
