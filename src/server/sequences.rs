@@ -165,6 +165,7 @@ mod tests {
         let mut tasks = Vec::new();
         for _ in 0..64 {
             let s = s.clone();
+            let topology = topology.clone();
             tasks.push(tokio::spawn(async move {
                 let slot = s.slot("robot");
                 let mut filter = slot.lock().await;
