@@ -10,9 +10,9 @@ use crate::geometry::verify::{
 };
 use crate::index::MapIndex;
 use crate::search::{self, Ranked, SearchOptions, SearchOutcome, permute};
+use cpu_time::ThreadTime;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
-use cpu_time::ThreadTime;
 use std::time::Duration;
 
 /// One tile of a cached query, in grid order.
