@@ -3,8 +3,8 @@
 use bowloc::features::{ExtractConfig, SiftParams};
 use bowloc::geometry::verify::{Estimator, Model, VerifyParams};
 use bowloc::search::SearchOptions;
-use bowloc::sequence::{Motion, SequenceModel};
 use bowloc::search::stop::{GENERIC_PARAMETER, RULES, parse_rule};
+use bowloc::sequence::{Motion, SequenceModel};
 use clap::Args;
 use clap::builder::{PossibleValue, PossibleValuesParser};
 

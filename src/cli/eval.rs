@@ -171,16 +171,17 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
 
 /// `bowloc eval --sequence`.
 fn sequence(a: EvalArgs, name: String, seeds: Vec<u64>) -> anyhow::Result<()> {
-    let stop = eval::sweep::parse_setting(&a.stop, 0).map_err(|e| anyhow::anyhow!("--stop {}: {e}", a.stop))?;
+    let stop = eval::sweep::parse_setting(&a.stop, 0)
+        .map_err(|e| anyhow::anyhow!("--stop {}: {e}", a.stop))?;
     let config = eval::sequence::SequenceEvalConfig {
         words: a.words,
         seeds,
         runs: a.runs,
         extract: a.extract.config(),
         tiles: a.tiles,
-        out: a
-            .out
-            .unwrap_or_else(|| PathBuf::from("data/eval").join(format!("{name}-k{}-sequence", a.words))),
+        out: a.out.unwrap_or_else(|| {
+            PathBuf::from("data/eval").join(format!("{name}-k{}-sequence", a.words))
+        }),
         cache: a
             .cache
             .unwrap_or_else(|| PathBuf::from("data/eval-cache").join(&name)),

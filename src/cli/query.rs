@@ -1,13 +1,13 @@
 //! `bowloc query`: localize image files and print the answers as JSON.
 
 use super::args::{SearchArgs, SequenceArgs, VerifyArgs};
-use bowloc::report::SequenceAnswer;
-use bowloc::sequence::{Filter, Topology, TopologyKind};
-use std::sync::Arc;
 use bowloc::features::TileGrid;
 use bowloc::pipeline::Localizer;
+use bowloc::report::SequenceAnswer;
+use bowloc::sequence::{Filter, Topology, TopologyKind};
 use clap::Args;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 #[derive(Args)]
 pub struct QueryArgs {
@@ -52,9 +52,7 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     let mut filter = Filter::new();
     let mut answers = Vec::with_capacity(a.images.len());
     for path in &a.images {
-        let prediction = a
-            .sequence
-            .then(|| filter.predict(&model, &topology, None));
+        let prediction = a.sequence.then(|| filter.predict(&model, &topology, None));
         let mut frame_options = options.clone();
         frame_options.prior = prediction.as_ref().map(|p| Arc::new(p.prior.clone()));
         let mut answer = localizer.localize_file(path, &frame_options)?;

@@ -506,7 +506,13 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         }
     }
 
-    let vocabs = vocabularies(&config.cache, config.words, &config.seeds, given_vocab, &map_desc)?;
+    let vocabs = vocabularies(
+        &config.cache,
+        config.words,
+        &config.seeds,
+        given_vocab,
+        &map_desc,
+    )?;
     let seeds: Vec<u64> = vocabs.iter().map(|v| v.meta().seed).collect();
     stages.vocabulary_s = seconds_since(&mut clock);
     let maps = maps_of(&config.cache, &vocabs, &map_desc, &dataset.name)?;

@@ -196,9 +196,7 @@ fn pass(
             min_features: mode.min_features,
             ..SearchOptions::default()
         };
-        let prediction = mode
-            .filter
-            .then(|| filter.predict(model, &topology, None));
+        let prediction = mode.filter.then(|| filter.predict(model, &topology, None));
         if let Some(pr) = &prediction {
             options.prior = Some(Arc::new(pr.prior.clone()));
         }
@@ -240,7 +238,10 @@ fn pass(
 pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
     config.model.check().map_err(anyhow::Error::msg)?;
     anyhow::ensure!(config.runs >= 1, "--runs must be at least 1");
-    anyhow::ensure!(!config.seeds.is_empty(), "give at least one vocabulary seed");
+    anyhow::ensure!(
+        !config.seeds.is_empty(),
+        "give at least one vocabulary seed"
+    );
     let dataset = Dataset::open(&config.dataset)?;
     let map_desc = cache::descriptors(
         &config.cache.join("map.bowdesc"),
@@ -327,7 +328,11 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
     for (v, map) in vocabs.iter().zip(&maps) {
         let seed = v.meta().seed;
         let quantizer = v.exact_quantizer();
-        let (queries, _) = quantize_queries(&query_desc, &quantizer, &format!("quantizing (seed {seed})"));
+        let (queries, _) = quantize_queries(
+            &query_desc,
+            &quantizer,
+            &format!("quantizing (seed {seed})"),
+        );
         let injected: Vec<Query> = match &inject_desc {
             Some(d) => quantize_queries(d, &quantizer, "quantizing injected images").0,
             None => Vec::new(),
@@ -362,7 +367,10 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
                 recall_at_5: mean(&|p| p.hits5 as f64 / p.scored.max(1) as f64),
                 features: mean(&|p| p.features / p.frames.max(1) as f64),
                 tiles: mean(&|p| p.tiles / p.frames.max(1) as f64),
-                recovery: mine.iter().flat_map(|p| p.recovery.iter().copied()).collect(),
+                recovery: mine
+                    .iter()
+                    .flat_map(|p| p.recovery.iter().copied())
+                    .collect(),
             });
         }
     }
@@ -370,9 +378,12 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
         .iter()
         .zip(per_mode)
         .map(|(mode, seeds)| {
-            let col = |f: fn(&ModeSeed) -> f64| Spread::of(&seeds.iter().map(f).collect::<Vec<_>>());
-            let recoveries: Vec<Option<usize>> =
-                seeds.iter().flat_map(|s| s.recovery.iter().copied()).collect();
+            let col =
+                |f: fn(&ModeSeed) -> f64| Spread::of(&seeds.iter().map(f).collect::<Vec<_>>());
+            let recoveries: Vec<Option<usize>> = seeds
+                .iter()
+                .flat_map(|s| s.recovery.iter().copied())
+                .collect();
             let all: Option<Vec<usize>> = recoveries.iter().copied().collect();
             let all = all.filter(|a| !a.is_empty());
             let rule = if mode.rule.name == "none" {
@@ -426,7 +437,14 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
 
 /// The report as a markdown table (means ± std over seeds, worst seed).
 pub fn markdown(r: &SequenceReport) -> String {
-    let pct = |s: &Spread| format!("{:.1} ± {:.1} (worst {:.1})", 100.0 * s.mean, 100.0 * s.std, 100.0 * s.min);
+    let pct = |s: &Spread| {
+        format!(
+            "{:.1} ± {:.1} (worst {:.1})",
+            100.0 * s.mean,
+            100.0 * s.std,
+            100.0 * s.min
+        )
+    };
     let mut out = format!(
         "{}: {} frames in order, {} injected at {:?}; {} vocabulary seeds {:?} (K = {}), {} runs; tiles {}\n\n\
          | mode | recall@1 % | recall@5 % | features % | tiles % | recovery (max / mean frames) |\n\

@@ -95,7 +95,12 @@ impl Prior {
 
     /// Only `ids` (equally likely); every other image excluded.
     pub fn only(images: usize, ids: impl IntoIterator<Item = u32>, kappa: f64) -> Self {
-        Self::new(images, ids.into_iter().map(|j| (j, 1.0)).collect(), 0.0, kappa)
+        Self::new(
+            images,
+            ids.into_iter().map(|j| (j, 1.0)).collect(),
+            0.0,
+            kappa,
+        )
     }
 
     /// The same prior, its searches' posteriors keeping `keep` images.
@@ -277,12 +282,7 @@ pub fn posterior(
 /// The most probable image given the votes and the posterior probability of
 /// its place: the images within [`Prior::window`] ids of it (`None` before
 /// any image has weight). Costs what [`posterior`] does, without sorting.
-pub fn leader(
-    prior: &Prior,
-    hist: &[f32],
-    touched: &[u32],
-    features: usize,
-) -> Option<(u32, f64)> {
+pub fn leader(prior: &Prior, hist: &[f32], touched: &[u32], features: usize) -> Option<(u32, f64)> {
     let (listed, other, others) = log_weights(prior, hist, touched, features);
     let (m, z) = normalizer(&listed, other, others);
     if z <= 0.0 || !z.is_finite() {
@@ -372,7 +372,13 @@ mod tests {
         let (k, q) = leader(&place, &hist, &[1, 2, 3], 1).unwrap();
         assert_eq!((j, k), (1, 1));
         let post = posterior(&alone, &hist, &[1, 2, 3], 1, 6);
-        let mass = |ids: &[u32]| post.top.iter().filter(|e| ids.contains(&e.0)).map(|e| e.1).sum::<f64>();
+        let mass = |ids: &[u32]| {
+            post.top
+                .iter()
+                .filter(|e| ids.contains(&e.0))
+                .map(|e| e.1)
+                .sum::<f64>()
+        };
         assert!((p - mass(&[1])).abs() < 1e-12);
         // image 0 has no vote: it holds the share of the images not listed
         let unlisted = post.rest / 3.0;

@@ -67,7 +67,10 @@ impl SequenceModel {
     pub fn check(&self) -> Result<(), String> {
         self.motion.check()?;
         if !(self.kappa.is_finite() && self.kappa > 0.0) {
-            return Err(format!("kappa must be a finite number > 0, got {}", self.kappa));
+            return Err(format!(
+                "kappa must be a finite number > 0, got {}",
+                self.kappa
+            ));
         }
         if !(1..=100_000).contains(&self.track) {
             return Err(format!("track must lie in 1..=100000, got {}", self.track));
@@ -212,7 +215,12 @@ impl Filter {
 }
 
 /// The belief moved by the motion model: the next frame's prior.
-pub fn predict(belief: &Posterior, model: &SequenceModel, topology: &Topology, steps: u64) -> Prior {
+pub fn predict(
+    belief: &Posterior,
+    model: &SequenceModel,
+    topology: &Topology,
+    steps: u64,
+) -> Prior {
     let images = topology.images().max(1);
     let u = belief.floor();
     let mut moved: Vec<(u32, f64)> = Vec::new();

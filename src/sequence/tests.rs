@@ -69,14 +69,20 @@ fn the_filter_recovers_a_path_from_noisy_evidence() {
             r.single as f64 / r.frames as f64,
         );
         assert!(single < 0.75, "seed {seed}: frames alone {single}");
-        assert!(filtered > 0.85 && filtered > single + 0.25, "seed {seed}: filtered {filtered} vs alone {single}");
+        assert!(
+            filtered > 0.85 && filtered > single + 0.25,
+            "seed {seed}: filtered {filtered} vs alone {single}"
+        );
     }
 }
 
 #[test]
 fn the_filter_follows_a_kidnapped_camera_within_a_few_frames() {
     // the camera walks 10..90, then is carried to 150 and walks on
-    let path: Vec<usize> = (0..80).map(|f| 10 + f).chain((0..30).map(|f| 150 + f)).collect();
+    let path: Vec<usize> = (0..80)
+        .map(|f| 10 + f)
+        .chain((0..30).map(|f| 150 + f))
+        .collect();
     for seed in 0..5 {
         let mut back = None;
         run(&path, 0.9, seed, |f, leader| {
@@ -133,4 +139,3 @@ fn prediction_keeps_probability_mass() {
     assert!(prior.of(0) > prior.of(10) && prior.of(10) > prior.of(20));
     assert!(prior.of(20) > 0.0);
 }
-

@@ -121,16 +121,25 @@ impl Motion {
     /// The values' ranges.
     pub fn check(&self) -> Result<(), String> {
         if !(self.sigma.is_finite() && self.sigma > 0.0) {
-            return Err(format!("sigma must be a finite number > 0, got {}", self.sigma));
+            return Err(format!(
+                "sigma must be a finite number > 0, got {}",
+                self.sigma
+            ));
         }
         if !self.drift.is_finite() {
             return Err(format!("drift must be a finite number, got {}", self.drift));
         }
         if !(self.reach.is_finite() && self.reach >= 0.0) {
-            return Err(format!("reach must be a finite number ≥ 0, got {}", self.reach));
+            return Err(format!(
+                "reach must be a finite number ≥ 0, got {}",
+                self.reach
+            ));
         }
         if !(0.0..1.0).contains(&self.teleport) {
-            return Err(format!("teleport must lie in [0, 1), got {}", self.teleport));
+            return Err(format!(
+                "teleport must lie in [0, 1), got {}",
+                self.teleport
+            ));
         }
         Ok(())
     }
@@ -186,7 +195,10 @@ mod tests {
             ..Motion::default()
         };
         let row = m.from(&t, 0, 1);
-        assert_eq!(row.iter().map(|e| e.0).collect::<Vec<_>>(), vec![0, 1, 2, 3, 4]);
+        assert_eq!(
+            row.iter().map(|e| e.0).collect::<Vec<_>>(),
+            vec![0, 1, 2, 3, 4]
+        );
         assert!((row.iter().map(|e| e.1).sum::<f64>() - 1.0).abs() < 1e-12);
         let mid = m.from(&t, 5, 1);
         assert_eq!(mid.len(), 9);
@@ -218,10 +230,21 @@ mod tests {
     #[test]
     fn kinds_resolve_against_the_map() {
         let xy = Some(vec![[0.0, 0.0]]);
-        assert_eq!(Topology::of(TopologyKind::Auto, 1, xy.clone()).unwrap().name(), "poses");
-        assert_eq!(Topology::of(TopologyKind::Auto, 1, None).unwrap().name(), "order");
+        assert_eq!(
+            Topology::of(TopologyKind::Auto, 1, xy.clone())
+                .unwrap()
+                .name(),
+            "poses"
+        );
+        assert_eq!(
+            Topology::of(TopologyKind::Auto, 1, None).unwrap().name(),
+            "order"
+        );
         assert!(Topology::of(TopologyKind::Poses, 1, None).is_err());
-        assert_eq!(Topology::of(TopologyKind::None, 1, xy).unwrap().name(), "none");
+        assert_eq!(
+            Topology::of(TopologyKind::None, 1, xy).unwrap().name(),
+            "none"
+        );
         assert!("sideways".parse::<TopologyKind>().is_err());
     }
 }

@@ -106,7 +106,9 @@ impl Near {
         positions
             .iter()
             .enumerate()
-            .filter(|(_, p)| ((p[0] - self.x).powi(2) + (p[1] - self.y).powi(2)).sqrt() <= self.radius)
+            .filter(|(_, p)| {
+                ((p[0] - self.x).powi(2) + (p[1] - self.y).powi(2)).sqrt() <= self.radius
+            })
             .map(|(j, _)| j as u32)
             .collect()
     }
@@ -538,7 +540,11 @@ pub async fn localize(
     if let Some(ids) = &allowed
         && sequence.is_none()
     {
-        options.prior = Some(Arc::new(Prior::only(images, ids.iter().copied(), model.kappa)));
+        options.prior = Some(Arc::new(Prior::only(
+            images,
+            ids.iter().copied(),
+            model.kappa,
+        )));
     }
     // A body still arriving at the deadline is not waited for.
     let image = tokio::time::timeout_at(deadline.into(), read_image(&state, request))
@@ -651,8 +657,8 @@ pub async fn delete_sequence(
     State(state): State<Arc<AppState>>,
     axum::extract::Path(name): axum::extract::Path<String>,
 ) -> Result<axum::http::StatusCode, ApiError> {
-    let name = super::sequences::valid_name(&name)
-        .map_err(|e| ApiError::invalid_parameter("name", e))?;
+    let name =
+        super::sequences::valid_name(&name).map_err(|e| ApiError::invalid_parameter("name", e))?;
     if state.sequences.remove(name) {
         Ok(axum::http::StatusCode::NO_CONTENT)
     } else {

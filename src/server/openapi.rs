@@ -7,7 +7,8 @@ use super::errors::{ErrorBody, ErrorDetail};
 use super::localize::{self, ImageUpload};
 use super::status::{self, MapInfo, Status};
 use crate::report::{
-    Candidate, FeatureUse, FilteredCandidate, SequenceAnswer, ImageSize, Localization, MapIdentity, RuleReport, Timings,
+    Candidate, FeatureUse, FilteredCandidate, ImageSize, Localization, MapIdentity, RuleReport,
+    SequenceAnswer, Timings,
 };
 use crate::search::StopInfo;
 use crate::search::stop::{RULES, rule_names};

@@ -62,7 +62,11 @@ impl StopRule for PosteriorRule {
             .prior
             .get_or_insert_with(|| Arc::new(Prior::uniform(images, DEFAULT_KAPPA)));
         let (j, p) = leader(prior, hist, touched, t)?;
-        (p >= 1.0 - self.epsilon)
-            .then(|| format!("posterior of image {j}'s place = {p:.4} ≥ 1 − {}", self.epsilon))
+        (p >= 1.0 - self.epsilon).then(|| {
+            format!(
+                "posterior of image {j}'s place = {p:.4} ≥ 1 − {}",
+                self.epsilon
+            )
+        })
     }
 }
