@@ -18,6 +18,9 @@
 //! - [`dataset`] — the shared dataset layout (image lists, ground truth).
 //! - [`pipeline`] — glue used by every front end: extraction over image lists,
 //!   building vocabularies and maps, answering one query.
+//! - [`sequence`] — frames of one moving camera localized together: the
+//!   map's topology, the motion model and the Bayes filter over map images
+//!   whose prediction is each frame's prior.
 //! - [`calibrate`] — choosing a rule's parameter for a map without ground
 //!   truth, from pseudo-queries made of the map's own images.
 //! - [`report`] — the answer to a query as users see it (JSON).
@@ -27,7 +30,7 @@
 //! - [`server`] — the HTTP service (`bowloc serve`): routes, configuration,
 //!   bounded worker pool, metrics, OpenAPI document, protobuf answers.
 //!
-//! The algorithmic core (`quantize`, `vocabulary`, `index`, `search`) has no
+//! The algorithmic core (`quantize`, `vocabulary`, `index`, `search`, `sequence`) has no
 //! OpenCV or HTTP types; front ends (`cli`, `server`) live at the edges.
 
 pub mod calibrate;
@@ -40,6 +43,7 @@ pub mod pipeline;
 pub mod quantize;
 pub mod report;
 pub mod search;
+pub mod sequence;
 pub mod server;
 pub mod store;
 pub mod vocabulary;

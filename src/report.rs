@@ -51,6 +51,14 @@ pub struct Localization {
     /// With `trace=true` or `trace=full`: the vote race. Absent otherwise.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub trace: Option<RaceTrace>,
+    /// With `sequence`: the sequence's filtered answer.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sequence: Option<SequenceAnswer>,
+    /// With a prior: the search's posterior, which a sequence takes as its
+    /// new belief (not sent).
+    #[serde(skip)]
+    #[schema(ignore)]
+    pub posterior: Option<crate::search::Posterior>,
 }
 
 /// The vote race: the search's state as the features arrived, sampled
@@ -177,6 +185,66 @@ fn race_points(t: &Trace) -> Vec<RacePoint> {
         .collect()
 }
 
+/// The sequence filter's answer for one frame.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct SequenceAnswer {
+    /// The sequence's name.
+    pub name: String,
+    /// The frame's index: as given, else the previous frame's + 1.
+    pub frame: u64,
+    /// Frames the sequence has applied since it (re)started, this one included.
+    pub frames: u64,
+    /// Why the sequence started afresh with this frame (`first`,
+    /// `out_of_order`, `gap`); absent when the frame continued it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub restart: Option<&'static str>,
+    /// Map images by posterior probability given every frame so far, best
+    /// first (at most `top_n`).
+    pub candidates: Vec<FilteredCandidate>,
+}
+
+/// A map image by its probability under the sequence filter.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct FilteredCandidate {
+    #[schema(minimum = 1)]
+    pub rank: usize,
+    pub id: u32,
+    pub name: String,
+    /// Posterior probability of this map image.
+    pub probability: f64,
+}
+
+impl SequenceAnswer {
+    /// The answer for a frame whose search gave `posterior`.
+    pub fn new(
+        map: &MapIndex,
+        name: &str,
+        prediction: &crate::sequence::Prediction,
+        frames: u64,
+        posterior: &crate::search::Posterior,
+        top_n: usize,
+    ) -> Self {
+        Self {
+            name: name.to_owned(),
+            frame: prediction.frame,
+            frames,
+            restart: prediction.restart.map(|r| r.as_str()),
+            candidates: posterior
+                .top
+                .iter()
+                .take(top_n)
+                .enumerate()
+                .map(|(i, &(id, probability))| FilteredCandidate {
+                    rank: i + 1,
+                    id,
+                    name: map.image(id).name.to_owned(),
+                    probability,
+                })
+                .collect(),
+        }
+    }
+}
+
 /// One map image proposed as the query's place.
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Candidate {
@@ -208,6 +276,10 @@ pub struct Candidate {
     /// Pose fields, when the map has them for this image.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose: Option<HashMap<String, f64>>,
+    /// With `sequence` or `near`: the probability of this map image given
+    /// this frame's votes alone (a uniform prior over the images allowed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub probability: Option<f64>,
 }
 
 /// How many of the query's features were extracted and used.
@@ -349,6 +421,7 @@ impl Candidate {
             pose: info
                 .pose
                 .map(|p| p.into_iter().map(|(k, v)| (k.to_owned(), v)).collect()),
+            probability: None,
         }
     }
 }
@@ -391,7 +464,18 @@ impl Localization {
         edge: EdgeTimings,
         extraction: Extraction,
     ) -> Self {
-        let candidates = Candidate::ranked(map, &outcome);
+        let mut candidates = Candidate::ranked(map, &outcome);
+        if let Some(frame) = outcome.frame_posterior.as_ref() {
+            for c in &mut candidates {
+                c.probability = Some(
+                    frame
+                        .top
+                        .iter()
+                        .find(|e| e.0 == c.id)
+                        .map_or(frame.floor(), |e| e.1),
+                );
+            }
+        }
         let t = outcome.timings;
         Self {
             candidates,
@@ -416,6 +500,8 @@ impl Localization {
             map: MapIdentity::of(map),
             verified: None,
             trace: outcome.trace.as_ref().map(RaceTrace::from),
+            sequence: None,
+            posterior: outcome.posterior,
         }
     }
 

@@ -4,6 +4,7 @@ use bowloc::features::{ExtractConfig, SiftParams};
 use bowloc::geometry::verify::{Estimator, Model, VerifyParams};
 use bowloc::search::SearchOptions;
 use bowloc::search::stop::{GENERIC_PARAMETER, RULES, parse_rule};
+use bowloc::sequence::{Motion, SequenceModel};
 use clap::Args;
 use clap::builder::{PossibleValue, PossibleValuesParser};
 
@@ -80,6 +81,9 @@ pub struct SearchArgs {
     /// m of rule verified: the inliers that verify the leader.
     #[arg(long)]
     pub inliers: Option<f64>,
+    /// ε of rule posterior: the probability left to places other than the leader's.
+    #[arg(long)]
+    pub epsilon: Option<f64>,
     /// Candidates to return.
     #[arg(long, default_value_t = SearchOptions::recommended().top_n)]
     pub top_n: usize,
@@ -105,6 +109,7 @@ impl SearchArgs {
             ("delta", self.delta),
             ("fraction", self.fraction),
             ("inliers", self.inliers),
+            ("epsilon", self.epsilon),
         ]
         .into_iter()
         .filter_map(|(n, v)| v.map(|v| (n, v)))
@@ -132,7 +137,53 @@ impl SearchArgs {
             min_features: self.min_features,
             min_score: self.min_score,
             deadline: None,
+            prior: None,
         })
+    }
+}
+
+/// The sequence filter's model (`--sequence`), defaults as the service's.
+#[derive(Args, Debug, Clone)]
+pub struct SequenceArgs {
+    /// Evidence weight κ: a frame's summed vote h(j) after t features counts as log-likelihood κ·h(j)/√t.
+    #[arg(long, default_value_t = SequenceModel::default().kappa)]
+    pub kappa: f64,
+    /// Chance per frame that the camera jumps anywhere in the map.
+    #[arg(long, default_value_t = SequenceModel::default().motion.teleport)]
+    pub teleport: f64,
+    /// Spread σ of one frame's move (map images along the order).
+    #[arg(long, default_value_t = SequenceModel::default().motion.sigma)]
+    pub motion_sigma: f64,
+    /// Expected move per frame along the map's order (map images).
+    #[arg(long, default_value_t = SequenceModel::default().motion.drift)]
+    pub drift: f64,
+    /// Farthest move per frame from the expected position.
+    #[arg(long, default_value_t = SequenceModel::default().motion.reach)]
+    pub reach: f64,
+    /// Map images the belief tracks.
+    #[arg(long, default_value_t = SequenceModel::default().track)]
+    pub track: usize,
+    /// The leader's place for the rule posterior: map images within this many ids.
+    #[arg(long, default_value_t = SequenceModel::default().window)]
+    pub window: u32,
+}
+
+impl SequenceArgs {
+    pub fn model(&self) -> anyhow::Result<SequenceModel> {
+        let m = SequenceModel {
+            kappa: self.kappa,
+            track: self.track,
+            window: self.window,
+            motion: Motion {
+                sigma: self.motion_sigma,
+                drift: self.drift,
+                reach: self.reach,
+                teleport: self.teleport,
+            },
+            ..SequenceModel::default()
+        };
+        m.check().map_err(anyhow::Error::msg)?;
+        Ok(m)
     }
 }
 

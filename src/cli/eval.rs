@@ -1,7 +1,7 @@
 //! `bowloc eval`: reproduce the paper's evaluation on a dataset in the shared
 //! layout (tables, CSV, JSON and plots in `--out`).
 
-use super::args::{ExtractArgs, VerifyArgs, dataset_name, vocab_seeds};
+use super::args::{ExtractArgs, SequenceArgs, VerifyArgs, dataset_name, vocab_seeds};
 use bowloc::eval::machine::OpenCvInfo;
 use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig, Warmup};
 use bowloc::features::TileGrid;
@@ -65,11 +65,30 @@ pub struct EvalArgs {
     /// full search and the --set settings.
     #[command(flatten)]
     verify: VerifyArgs,
+    /// Replay the queries in list order as one camera's frames, with and
+    /// without the sequence filter (docs/results.md, "Sequences").
+    #[arg(long)]
+    sequence: bool,
+    /// With --sequence: the stopping rule of the stopped modes, RULE=VALUE or
+    /// RULE=VALUE@WARMUP.
+    #[arg(long, default_value = "posterior=0.01")]
+    stop: String,
+    /// With --sequence: unrelated images to inject into the sequence (a list or a folder).
+    #[arg(long)]
+    inject: Option<PathBuf>,
+    /// With --sequence: how many unrelated images to inject, evenly spaced.
+    #[arg(long, default_value_t = 4)]
+    injections: usize,
+    #[command(flatten)]
+    model: SequenceArgs,
 }
 
 pub fn run(a: EvalArgs) -> anyhow::Result<()> {
     let name = dataset_name(&a.dataset);
     let seeds = vocab_seeds(&a.vocab_seeds);
+    if a.sequence {
+        return sequence(a, name, seeds);
+    }
     let verify = a.verify.params()?;
     let config = EvalConfig {
         verify: verify.enabled.then_some(verify),
@@ -147,6 +166,36 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         }
     }
     println!("{}", config.out.join("results.md").display());
+    Ok(())
+}
+
+/// `bowloc eval --sequence`.
+fn sequence(a: EvalArgs, name: String, seeds: Vec<u64>) -> anyhow::Result<()> {
+    let stop = eval::sweep::parse_setting(&a.stop, 0)
+        .map_err(|e| anyhow::anyhow!("--stop {}: {e}", a.stop))?;
+    let config = eval::sequence::SequenceEvalConfig {
+        words: a.words,
+        seeds,
+        runs: a.runs,
+        extract: a.extract.config(),
+        tiles: a.tiles,
+        out: a.out.unwrap_or_else(|| {
+            PathBuf::from("data/eval").join(format!("{name}-k{}-sequence", a.words))
+        }),
+        cache: a
+            .cache
+            .unwrap_or_else(|| PathBuf::from("data/eval-cache").join(&name)),
+        model: a.model.model()?,
+        stop: stop.rule,
+        min_features: stop.min_features,
+        inject: a.inject,
+        injections: a.injections,
+        command: std::env::args().collect::<Vec<_>>().join(" "),
+        dataset: a.dataset,
+    };
+    let report = eval::sequence::run(&config)?;
+    print!("{}", eval::sequence::markdown(&report));
+    println!("{}", config.out.join("sequence.md").display());
     Ok(())
 }
 

@@ -1,10 +1,13 @@
 //! `bowloc query`: localize image files and print the answers as JSON.
 
-use super::args::{SearchArgs, VerifyArgs};
+use super::args::{SearchArgs, SequenceArgs, VerifyArgs};
 use bowloc::features::TileGrid;
 use bowloc::pipeline::Localizer;
+use bowloc::report::SequenceAnswer;
+use bowloc::sequence::{Filter, Topology, TopologyKind};
 use clap::Args;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 #[derive(Args)]
 pub struct QueryArgs {
@@ -25,6 +28,13 @@ pub struct QueryArgs {
     tiles: TileGrid,
     #[command(flatten)]
     verify: VerifyArgs,
+    /// Run the images, in the order given, as the frames of one camera
+    /// through the sequence filter (each answer's `sequence` has the filtered
+    /// candidates).
+    #[arg(long)]
+    sequence: bool,
+    #[command(flatten)]
+    model: SequenceArgs,
 }
 
 pub fn run(a: QueryArgs) -> anyhow::Result<()> {
@@ -32,9 +42,26 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     localizer.tiles = a.tiles;
     localizer.set_verify(a.verify.params()?);
     let options = a.search.options()?;
+    let model = a.model.model()?;
+    let topology = Topology::of(
+        TopologyKind::Auto,
+        localizer.map.meta().images,
+        localizer.map.positions(),
+    )
+    .map_err(anyhow::Error::msg)?;
+    let mut filter = Filter::new();
     let mut answers = Vec::with_capacity(a.images.len());
     for path in &a.images {
-        let answer = localizer.localize_file(path, &options)?;
+        let prediction = a.sequence.then(|| filter.predict(&model, &topology, None));
+        let mut frame_options = options.clone();
+        frame_options.prior = prediction.as_ref().map(|p| Arc::new(p.prior.clone()));
+        let mut answer = localizer.localize_file(path, &frame_options)?;
+        if let (Some(p), Some(post)) = (&prediction, answer.posterior.take()) {
+            filter.update(post, p);
+            answer.sequence = filter.belief().map(|b| {
+                SequenceAnswer::new(&localizer.map, "cli", p, filter.frames(), b, options.top_n)
+            });
+        }
         let mut value = serde_json::to_value(&answer)?;
         value["query"] = serde_json::Value::String(path.display().to_string());
         answers.push(value);

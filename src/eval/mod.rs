@@ -19,8 +19,10 @@
 //! 6. [`table`] and [`plots`]: the outputs, with every query's answers in
 //!    `results.json` for re-scoring.
 //!
-//! [`shards`] replays the same queries on a map split into shards
-//! (`bowloc shards`).
+//! [`sequence`] is the other evaluation (`bowloc eval --sequence`): the
+//! queries replayed in order as one camera's frames, with and without the
+//! sequence filter, on the same caches. [`shards`] replays the same queries
+//! on a map split into shards (`bowloc shards`).
 
 pub mod cache;
 pub mod equal_recall;
@@ -28,6 +30,7 @@ pub mod machine;
 pub mod metrics;
 pub mod plots;
 pub mod recommend;
+pub mod sequence;
 pub mod shards;
 pub mod summary;
 pub mod sweep;
@@ -373,6 +376,47 @@ fn quantize_queries(
     quantized.into_iter().unzip()
 }
 
+/// The vocabularies of the evaluation: `given`, or one per k-means seed of
+/// `words` words trained on the map's descriptors (cached).
+fn vocabularies(
+    cache_dir: &Path,
+    words: usize,
+    seeds: &[u64],
+    given: Option<Vocabulary>,
+    map_desc: &cache::DescriptorSet,
+) -> anyhow::Result<Vec<Vocabulary>> {
+    match given {
+        Some(v) => Ok(vec![v]),
+        None => seeds
+            .iter()
+            .map(|&seed| {
+                cache::vocabulary(
+                    cache_dir,
+                    map_desc,
+                    &KmeansConfig {
+                        k: words,
+                        seed,
+                        ..KmeansConfig::default()
+                    },
+                )
+            })
+            .collect(),
+    }
+}
+
+/// The map of each vocabulary (cached).
+fn maps_of(
+    cache_dir: &Path,
+    vocabs: &[Vocabulary],
+    map_desc: &cache::DescriptorSet,
+    name: &str,
+) -> anyhow::Result<Vec<MapIndex>> {
+    vocabs
+        .iter()
+        .map(|v| cache::map_index(cache_dir, v, map_desc, name))
+        .collect()
+}
+
 fn seconds_since(t: &mut Instant) -> f64 {
     let s = t.elapsed().as_secs_f64();
     *t = Instant::now();
@@ -462,30 +506,16 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         }
     }
 
-    let vocabs: Vec<Vocabulary> = match given_vocab {
-        Some(v) => vec![v],
-        None => config
-            .seeds
-            .iter()
-            .map(|&seed| {
-                cache::vocabulary(
-                    &config.cache,
-                    &map_desc,
-                    &KmeansConfig {
-                        k: config.words,
-                        seed,
-                        ..KmeansConfig::default()
-                    },
-                )
-            })
-            .collect::<anyhow::Result<_>>()?,
-    };
+    let vocabs = vocabularies(
+        &config.cache,
+        config.words,
+        &config.seeds,
+        given_vocab,
+        &map_desc,
+    )?;
     let seeds: Vec<u64> = vocabs.iter().map(|v| v.meta().seed).collect();
     stages.vocabulary_s = seconds_since(&mut clock);
-    let maps: Vec<MapIndex> = vocabs
-        .iter()
-        .map(|v| cache::map_index(&config.cache, v, &map_desc, &dataset.name))
-        .collect::<anyhow::Result<_>>()?;
+    let maps = maps_of(&config.cache, &vocabs, &map_desc, &dataset.name)?;
     stages.map_s = seconds_since(&mut clock);
     // one OpenCV thread per query: the sweep already runs one query per core
     crate::features::set_opencv_threads(1);

@@ -102,6 +102,24 @@ impl MapIndex {
         }
     }
 
+    /// Each image's position (pose fields `x` and `y`; NaN where unknown),
+    /// when the map has both fields.
+    pub fn positions(&self) -> Option<Vec<[f64; 2]>> {
+        let fields = &self.meta.pose_fields;
+        let x = fields.iter().position(|f| f == "x")?;
+        let y = fields.iter().position(|f| f == "y")?;
+        let poses = self.view().poses;
+        let n = fields.len();
+        Some(
+            (0..self.meta.images)
+                .map(|i| {
+                    let at = |k: usize| poses.get(i * n + k).copied().unwrap_or(f64::NAN);
+                    [at(x), at(y)]
+                })
+                .collect(),
+        )
+    }
+
     /// Name, place label and pose of map image `id`.
     pub fn image(&self, id: u32) -> ImageInfo<'_> {
         let view = self.view();

@@ -20,12 +20,14 @@
 //! OpenCV, no HTTP.
 
 pub mod permute;
+pub mod prior;
 pub mod rank;
 pub mod shard;
 pub mod stop;
 pub mod trace;
 pub mod vote;
 
+pub use prior::{Posterior, Prior};
 pub use rank::Ranked;
 pub use stop::{LeaderCheck, RuleSpec, StopRule};
 pub use trace::{Trace, TracePoint};
@@ -35,6 +37,7 @@ use crate::index::MapIndex;
 use crate::quantize::Quantizer;
 use ndarray::{Array2, ArrayView2};
 use serde::Serialize;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// How to run one search.
@@ -53,6 +56,11 @@ pub struct SearchOptions {
     pub min_score: f32,
     /// Give up (returning the answer so far) once this instant passes.
     pub deadline: Option<Instant>,
+    /// A prior over map images (a sequence's prediction, a pose
+    /// restriction): the rule `posterior` reads it, a prior that excludes
+    /// images keeps them out of the candidates, and the outcome carries the
+    /// posterior it gives.
+    pub prior: Option<Arc<Prior>>,
 }
 
 impl Default for SearchOptions {
@@ -65,6 +73,7 @@ impl Default for SearchOptions {
             min_features: 0,
             min_score: 0.0,
             deadline: None,
+            prior: None,
         }
     }
 }
@@ -131,6 +140,12 @@ pub struct SearchOutcome {
     pub timings: SearchTimings,
     /// The vote race, when the search was traced.
     pub trace: Option<Trace>,
+    /// With a prior: the posterior over map images given the prior and the
+    /// votes ([`prior::posterior`], keeping [`Prior::keep`] images).
+    pub posterior: Option<Posterior>,
+    /// With a prior: the posterior of the votes alone (a uniform prior, the
+    /// same κ), the frame's own probabilities.
+    pub frame_posterior: Option<Posterior>,
 }
 
 impl SearchOutcome {
@@ -171,6 +186,7 @@ impl<'m> Search<'m> {
     pub fn new(map: &'m MapIndex, options: &SearchOptions) -> Self {
         let rule = options.rule.build(&stop::RuleContext {
             top_n: options.top_n,
+            prior: options.prior.clone(),
         });
         let voter = Voter::with_needs(&map.view(), rule.needs());
         Self {
@@ -335,8 +351,28 @@ impl<'m> Search<'m> {
             let statistic = self.rule.statistic(&self.voter);
             trace.finish(TracePoint::of(self.voter.tally(), statistic));
         }
+        let prior = self.options.prior.as_deref();
+        let (posterior, frame_posterior) = match prior {
+            Some(p) => {
+                let (h, touched) = (self.voter.histogram(), self.voter.touched());
+                let uniform = Prior::uniform(p.images(), p.kappa).keeping(p.keep);
+                (
+                    Some(prior::posterior(p, h, touched, used, p.keep)),
+                    Some(prior::posterior(&uniform, h, touched, used, p.keep)),
+                )
+            }
+            None => (None, None),
+        };
+        let allowed = prior.filter(|p| p.restricts());
         SearchOutcome {
-            candidates: rank::top_n(&self.voter, self.options.top_n, self.options.min_score),
+            candidates: rank::top_n(
+                &self.voter,
+                self.options.top_n,
+                self.options.min_score,
+                allowed,
+            ),
+            posterior,
+            frame_posterior,
             features_total: self.fed,
             features_used: used,
             stop: StopInfo {

@@ -3,6 +3,7 @@
 //! compare across queries whatever the stop point and whether or not the
 //! query's feature count is known.
 
+use super::prior::Prior;
 use super::vote::{VoteStats, Voter};
 
 /// One ranked map image.
@@ -15,15 +16,23 @@ pub struct Ranked {
 }
 
 /// The `n` highest-voted images (ties broken by lower id), scores at least
-/// `min_score`.
-pub fn top_n(voter: &Voter<'_>, n: usize, min_score: f32) -> Vec<Ranked> {
+/// `min_score`; with `allowed`, only the images that prior allows.
+pub fn top_n(voter: &Voter<'_>, n: usize, min_score: f32, allowed: Option<&Prior>) -> Vec<Ranked> {
     let t = voter.tally();
     if t.features == 0 || n == 0 {
         return Vec::new();
     }
     let scale = 1.0 / t.features as f32;
     let h = voter.histogram();
-    let mut ids: Vec<u32> = voter.touched().to_vec();
+    let mut ids: Vec<u32> = match allowed {
+        Some(p) => voter
+            .touched()
+            .iter()
+            .copied()
+            .filter(|&j| p.allows(j))
+            .collect(),
+        None => voter.touched().to_vec(),
+    };
     let better = |a: &u32, b: &u32| {
         h[*b as usize]
             .total_cmp(&h[*a as usize])

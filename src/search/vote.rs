@@ -101,6 +101,12 @@ pub trait VoteStats {
     /// images with votes, and left × the map's largest cap when some image
     /// has none (needs `Needs::outside`). Scans the images with votes.
     fn best_outside(&self, n: usize, left: f32) -> f32;
+
+    /// The whole histogram h and the images with a vote, when this view
+    /// holds them (the [`Voter`] does; a sharded search does not).
+    fn histogram_and_touched(&self) -> Option<(&[f32], &[u32])> {
+        None
+    }
 }
 
 /// The k highest values of a histogram whose entries only grow, kept in
@@ -275,6 +281,10 @@ impl<'a> Voter<'a> {
 impl VoteStats for Voter<'_> {
     fn tally(&self) -> &Tally {
         &self.tally
+    }
+
+    fn histogram_and_touched(&self) -> Option<(&[f32], &[u32])> {
+        Some((&self.hist, &self.touched))
     }
 
     fn top(&self) -> &[(f32, u32)] {

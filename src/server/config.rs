@@ -7,6 +7,7 @@
 use crate::geometry::verify::VerifyParams;
 use crate::quantize::QuantizerKind;
 use crate::search::{RuleSpec, SearchOptions};
+use crate::sequence::{Motion, SequenceModel, TopologyKind};
 use figment::Figment;
 use figment::providers::{Env, Format, Serialized, Toml};
 use serde::{Deserialize, Serialize};
@@ -29,6 +30,91 @@ pub struct Config {
     pub bootstrap: BootstrapConfig,
     /// Geometric verification of the top vote candidates.
     pub verify: VerifyParams,
+    /// Sequences of frames (`/localize?sequence=NAME`).
+    pub sequence: SequenceConfig,
+}
+
+/// Sequences: their bounds, the map's topology and the filter's model
+/// (docs/service.md, "Sequences").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SequenceConfig {
+    /// Sequences kept at once; beyond, the least recently used is dropped.
+    pub max_sequences: usize,
+    /// A sequence without a frame for this long is dropped.
+    pub idle_ms: u64,
+    /// Which map images neighbour: `auto` (poses x, y when the map has
+    /// them, else order), `order`, `poses` or `none`.
+    pub topology: TopologyKind,
+    /// Rule of a frame that names none (its parameter in `threshold`).
+    pub rule: String,
+    pub threshold: Option<f64>,
+    /// Warm-up of that rule.
+    pub min_features: usize,
+    /// Evidence weight κ: votes h(j) after t features count as κ·h(j)/√t.
+    pub kappa: f64,
+    /// Map images each sequence's belief tracks.
+    pub track: usize,
+    /// A gap of more than this many frames restarts a sequence.
+    pub max_gap: u64,
+    /// The leader's place for the rule `posterior`: images within this
+    /// many ids (order topology).
+    pub window: u32,
+    /// Motion per frame: spread σ, expected move along the order, farthest
+    /// move from it, and the chance of a jump anywhere.
+    pub sigma: f64,
+    pub drift: f64,
+    pub reach: f64,
+    pub teleport: f64,
+}
+
+impl Default for SequenceConfig {
+    fn default() -> Self {
+        let m = SequenceModel::default();
+        Self {
+            max_sequences: 10_000,
+            idle_ms: 600_000,
+            topology: TopologyKind::Auto,
+            rule: "posterior".into(),
+            threshold: Some(0.7),
+            min_features: 100,
+            kappa: m.kappa,
+            track: m.track,
+            max_gap: m.max_gap,
+            window: m.window,
+            sigma: m.motion.sigma,
+            drift: m.motion.drift,
+            reach: m.motion.reach,
+            teleport: m.motion.teleport,
+        }
+    }
+}
+
+impl SequenceConfig {
+    /// The filter's model.
+    pub fn model(&self) -> SequenceModel {
+        SequenceModel {
+            motion: Motion {
+                sigma: self.sigma,
+                drift: self.drift,
+                reach: self.reach,
+                teleport: self.teleport,
+            },
+            kappa: self.kappa,
+            track: self.track,
+            max_gap: self.max_gap,
+            window: self.window,
+        }
+    }
+
+    /// The rule of a frame that names none.
+    pub fn rule(&self) -> Result<RuleSpec, String> {
+        RuleSpec::new(&self.rule, self.threshold)
+    }
+
+    pub fn idle(&self) -> Duration {
+        Duration::from_millis(self.idle_ms)
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -422,6 +508,19 @@ impl Config {
         }
         if let Err(e) = self.verify.validate() {
             return bad("verify", e);
+        }
+        let q = &self.sequence;
+        if let Err(e) = q.model().check() {
+            return bad("sequence", e);
+        }
+        if let Err(e) = q.rule() {
+            return bad("sequence.rule / sequence.threshold", e);
+        }
+        if q.max_sequences == 0 || q.idle_ms == 0 {
+            return bad(
+                "sequence.max_sequences / sequence.idle_ms",
+                "must be at least 1".into(),
+            );
         }
         if self.bootstrap.enabled && self.bootstrap.words < 2 {
             return bad("bootstrap.words", "must be at least 2".into());

@@ -39,6 +39,7 @@ pub const CODES: &[(u16, &str)] = &[
     (400, "missing_image_field"),
     (400, "body_read_error"),
     (404, "not_found"),
+    (404, "unknown_sequence"),
     (405, "method_not_allowed"),
     (408, "request_timeout"),
     (408, "body_timeout"),

@@ -9,9 +9,9 @@ use super::proto;
 use super::workers::PoolError;
 use crate::features::TileGrid;
 use crate::pipeline::Tracing;
-use crate::report::Localization;
+use crate::report::{Localization, SequenceAnswer};
 use crate::search::stop::{GENERIC_PARAMETER, parse_rule};
-use crate::search::{RuleSpec, SearchOptions};
+use crate::search::{Prior, RuleSpec, SearchOptions};
 use axum::Json;
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Multipart, RawQuery, Request, State};
@@ -48,6 +48,10 @@ pub struct LocalizeParams {
     /// Inliers m of rule verified, a whole number in 4..=1000.
     #[param(value_type = Option<u32>, minimum = 4, maximum = 1000)]
     pub inliers: Option<String>,
+    /// ε of rule posterior, in (0, 1): it stops once the leader's place holds
+    /// 1 − ε of the posterior.
+    #[param(value_type = Option<f64>)]
+    pub epsilon: Option<String>,
     /// Seed of the feature permutation (0 to 2^63−1, the API document's
     /// int64). Without it each request draws its own, below 2^53 so that it
     /// survives a JSON number; the answer reports the seed used.
@@ -80,6 +84,43 @@ pub struct LocalizeParams {
     /// not in `timings_ms`). Default `false`.
     #[param(value_type = Option<String>, pattern = "^(true|false|full)$")]
     pub trace: Option<String>,
+    /// Name of the sequence this frame belongs to (1 to 128 letters, digits,
+    /// `-`, `_`, `.`, `:`): the service keeps a belief over map images per
+    /// sequence, and the answer's `sequence` carries the filtered candidates.
+    /// Without a rule, the frame uses the configured `sequence.rule`.
+    #[param(value_type = Option<String>, example = "robot-1")]
+    pub sequence: Option<String>,
+    /// With `sequence`: the frame's index (0 to 2^63−1). A frame not after the
+    /// previous one, or more than `sequence.max_gap` after it, restarts the
+    /// sequence. Default: the previous frame's + 1.
+    #[param(value_type = Option<i64>, minimum = 0)]
+    pub frame: Option<String>,
+    /// `x,y,radius`: only map images whose pose (fields x, y) lies within
+    /// the radius of (x, y) may be candidates (maps with poses).
+    #[param(value_type = Option<String>, example = "12.5,-3,10")]
+    pub near: Option<String>,
+}
+
+/// A pose restriction: (x, y, radius).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Near {
+    pub x: f64,
+    pub y: f64,
+    pub radius: f64,
+}
+
+impl Near {
+    /// The map images within the radius, given their positions.
+    pub fn images(&self, positions: &[[f64; 2]]) -> Vec<u32> {
+        positions
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| {
+                ((p[0] - self.x).powi(2) + (p[1] - self.y).powi(2)).sqrt() <= self.radius
+            })
+            .map(|(j, _)| j as u32)
+            .collect()
+    }
 }
 
 /// What a request may ask for within the configuration.
@@ -150,6 +191,59 @@ impl LocalizeParams {
         }
     }
 
+    /// The sequence named, checked.
+    pub fn sequence(&self) -> Result<Option<&str>, ApiError> {
+        let name = self.sequence.as_deref();
+        if name.is_none() && self.frame.is_some() {
+            return Err(ApiError::invalid_parameter(
+                "frame",
+                "a frame index needs a sequence",
+            ));
+        }
+        name.map(|n| {
+            super::sequences::valid_name(n).map_err(|e| ApiError::invalid_parameter("sequence", e))
+        })
+        .transpose()
+    }
+
+    /// The frame index given, if any.
+    pub fn frame(&self) -> Result<Option<u64>, ApiError> {
+        self.frame
+            .as_deref()
+            .map(|v| whole("frame", v, i64::MAX as u64))
+            .transpose()
+    }
+
+    /// The pose restriction asked for, if any.
+    pub fn near(&self) -> Result<Option<Near>, ApiError> {
+        let Some(v) = &self.near else { return Ok(None) };
+        let parts: Vec<&str> = v.split(',').collect();
+        let [x, y, r] = parts[..] else {
+            return Err(ApiError::invalid_parameter(
+                "near",
+                format!("`{v}` is not x,y,radius"),
+            ));
+        };
+        let (x, y, radius) = (number("near", x)?, number("near", y)?, number("near", r)?);
+        if radius < 0.0 {
+            return Err(ApiError::invalid_parameter(
+                "near",
+                format!("the radius must be ≥ 0, got {radius}"),
+            ));
+        }
+        Ok(Some(Near { x, y, radius }))
+    }
+
+    /// Whether the request names a rule or a rule parameter.
+    pub fn names_a_rule(&self) -> bool {
+        self.rule.is_some()
+            || self.threshold.is_some()
+            || self.delta.is_some()
+            || self.fraction.is_some()
+            || self.inliers.is_some()
+            || self.epsilon.is_some()
+    }
+
     /// Whether to verify, on top of the configured default.
     pub fn verify(&self, default: bool) -> Result<bool, ApiError> {
         match self.verify.as_deref().map(str::trim) {
@@ -184,6 +278,7 @@ impl LocalizeParams {
             ("delta", &self.delta),
             ("fraction", &self.fraction),
             ("inliers", &self.inliers),
+            ("epsilon", &self.epsilon),
         ] {
             if let Some(v) = value {
                 given.push((name, number(name, v)?));
@@ -436,24 +531,83 @@ pub async fn localize(
     let localizer = state.localizer()?;
     let format = Format::from_accept(request.headers());
     let params = LocalizeParams::from_query(query.as_deref())?;
-    let mut options = params.options(&state.defaults)?;
+    let sequence = params.sequence()?;
+    let frame = params.frame()?;
+    let near = params.near()?;
+    let mut defaults = std::borrow::Cow::Borrowed(&state.defaults);
+    if sequence.is_some() && !params.names_a_rule() {
+        // a frame of a sequence stops by the sequence's rule
+        let q = &state.config.sequence;
+        let d = defaults.to_mut();
+        d.options.rule = q
+            .rule()
+            .map_err(|e| ApiError::internal(format!("sequence.rule: {e}")))?;
+        d.options.min_features = q.min_features;
+    }
+    let mut options = params.options(&defaults)?;
     let tiles = params.tiles(localizer.tiles)?;
     let verify = params.verify(state.config.verify.enabled)?;
     let tracing = params.tracing()?;
     options.deadline = Some(deadline);
+    let model = state.config.sequence.model();
+    let allowed = match near {
+        Some(n) => {
+            let positions = localizer.map.positions().ok_or_else(|| {
+                ApiError::invalid_parameter("near", "the map has no poses with fields x and y")
+            })?;
+            Some(n.images(&positions))
+        }
+        None => None,
+    };
+    let images = localizer.map.meta().images;
+    if let Some(ids) = &allowed
+        && sequence.is_none()
+    {
+        options.prior = Some(Arc::new(Prior::only(
+            images,
+            ids.iter().copied(),
+            model.kappa,
+        )));
+    }
     // A body still arriving at the deadline is not waited for.
     let image = tokio::time::timeout_at(deadline.into(), read_image(&state, request))
         .await
         .map_err(|_| ApiError::request_timeout())??;
     // Format and pixel count from the header, before the image takes a worker.
     crate::features::probe(&image, localizer.limits)?;
+    // A frame of a sequence holds its sequence's lock from prediction to
+    // update, so frames of one sequence apply one at a time.
+    let mut held = None;
+    if let Some(name) = sequence {
+        let topology = state.topology()?;
+        let slot = state.sequences.slot(name);
+        let mut filter = tokio::time::timeout_at(deadline.into(), slot.lock_owned())
+            .await
+            .map_err(|_| ApiError::queue_timeout())?;
+        let prediction = filter.predict(&model, topology, frame);
+        let prior = match &allowed {
+            Some(ids) => Prior::new(
+                images,
+                ids.iter().map(|&j| (j, prediction.prior.of(j))).collect(),
+                0.0,
+                model.kappa,
+            )
+            .keeping(model.track)
+            .with_window(prediction.prior.window),
+            None => prediction.prior.clone(),
+        };
+        options.prior = Some(Arc::new(prior));
+        held = Some((name, filter, prediction));
+    }
+    let top_n = options.top_n;
+    let worker_localizer = localizer.clone();
     let answer = state
         .pool
         .run(Some(tokio::time::Instant::from_std(deadline)), move || {
             if Instant::now() >= deadline {
                 return Err(ApiError::deadline_exceeded()); // no work for a lost cause
             }
-            Ok(localizer.localize_traced(&image, &options, tiles, verify, tracing)?)
+            Ok(worker_localizer.localize_traced(&image, &options, tiles, verify, tracing)?)
         })
         .await
         .map_err(|e| match e {
@@ -466,6 +620,24 @@ pub async fn localize(
         })??;
     if answer.stop.kind == crate::search::StopKind::Deadline && answer.features.used == 0 {
         return Err(ApiError::deadline_exceeded()); // the deadline passed before any vote
+    }
+    let mut answer = answer;
+    if let Some((name, mut filter, prediction)) = held
+        && let Some(posterior) = answer.posterior.take()
+    {
+        if let Some(r) = prediction.restart {
+            super::metrics::sequence_restarted(r.as_str());
+        }
+        filter.update(posterior, &prediction);
+        let belief = filter.belief().expect("just updated");
+        answer.sequence = Some(SequenceAnswer::new(
+            &localizer.map,
+            name,
+            &prediction,
+            filter.frames(),
+            belief,
+            top_n,
+        ));
     }
     super::metrics::localized(&answer);
     let summary = LocalizeSummary {
@@ -489,6 +661,35 @@ fn encode(answer: &Localization, format: Format) -> Response {
             proto::encode(answer),
         )
             .into_response(),
+    }
+}
+
+/// Forget a sequence: its next frame starts it afresh.
+#[utoipa::path(
+    delete,
+    path = "/sequences/{name}",
+    tag = "localize",
+    params(("name" = String, Path, description = "The sequence's name.")),
+    responses(
+        (status = 204, description = "The sequence was forgotten."),
+        (status = 400, description = "Not a sequence name (`invalid_parameter`).", body = ErrorBody),
+        (status = 404, description = "No such sequence is live (`unknown_sequence`).", body = ErrorBody),
+    )
+)]
+pub async fn delete_sequence(
+    State(state): State<Arc<AppState>>,
+    axum::extract::Path(name): axum::extract::Path<String>,
+) -> Result<axum::http::StatusCode, ApiError> {
+    let name =
+        super::sequences::valid_name(&name).map_err(|e| ApiError::invalid_parameter("name", e))?;
+    if state.sequences.remove(name) {
+        Ok(axum::http::StatusCode::NO_CONTENT)
+    } else {
+        Err(ApiError::new(
+            axum::http::StatusCode::NOT_FOUND,
+            "unknown_sequence",
+            format!("no sequence `{name}` is live"),
+        ))
     }
 }
 

@@ -42,6 +42,9 @@ pub const MAP_IMAGES: &str = "bowloc_map_images";
 pub const MAP_WORDS: &str = "bowloc_map_words";
 pub const MAP_POSTINGS: &str = "bowloc_map_postings";
 pub const BUILD_INFO: &str = "bowloc_build_info";
+pub const SEQUENCES: &str = "bowloc_sequences_live";
+pub const SEQUENCE_EVICTIONS: &str = "bowloc_sequence_evictions_total";
+pub const SEQUENCE_RESTARTS: &str = "bowloc_sequence_restarts_total";
 
 /// The process's recorder. Installed by the first caller; later callers (a
 /// test building several routers) share it.
@@ -164,6 +167,30 @@ fn describe() {
         "(word, image) entries of the loaded map's inverted index."
     );
     describe_gauge!(BUILD_INFO, "Always 1; the version is a label.");
+    describe_gauge!(SEQUENCES, "Sequences kept now (/localize?sequence=NAME).");
+    describe_counter!(
+        SEQUENCE_EVICTIONS,
+        "Sequences dropped, by reason: capacity (least recently used beyond sequence.max_sequences) or idle."
+    );
+    describe_counter!(
+        SEQUENCE_RESTARTS,
+        "Frames that started a sequence afresh, by reason: first, out_of_order, gap."
+    );
+}
+
+/// Sequences kept now.
+pub fn sequences_live(n: usize) {
+    gauge!(SEQUENCES).set(n as f64);
+}
+
+/// A sequence was dropped (`capacity` or `idle`).
+pub fn sequence_evicted(reason: &'static str) {
+    counter!(SEQUENCE_EVICTIONS, "reason" => reason).increment(1);
+}
+
+/// A frame started its sequence afresh.
+pub fn sequence_restarted(reason: &'static str) {
+    counter!(SEQUENCE_RESTARTS, "reason" => reason).increment(1);
 }
 
 /// One answered HTTP request.
@@ -211,6 +238,13 @@ fn zero_counters() {
     for verified in ["true", "false"] {
         counter!(VERIFIED, "verified" => verified).absolute(0);
     }
+    for reason in ["capacity", "idle"] {
+        counter!(SEQUENCE_EVICTIONS, "reason" => reason).absolute(0);
+    }
+    for reason in ["first", "out_of_order", "gap"] {
+        counter!(SEQUENCE_RESTARTS, "reason" => reason).absolute(0);
+    }
+    gauge!(SEQUENCES).set(0.0);
 }
 
 /// The collector of the process's own metrics.

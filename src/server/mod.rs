@@ -10,6 +10,8 @@
 //!   drain), and what the HTTP layer answers by itself;
 //! - [`bootstrap`]: building a missing default map, then loading;
 //! - [`localize`]: `POST /localize`, its parameters and body;
+//! - [`sequences`]: the per-sequence state of `/localize?sequence=NAME`
+//!   (bounded, one lock each) and `DELETE /sequences/{name}`;
 //! - [`status`]: health, readiness, `/map`, `/metrics`, `/openapi.json`;
 //! - [`page`]: the page for people at `GET /`, its script and style;
 //! - [`thumbnails`]: `GET /images/{id}/thumbnail`, map images for the page;
@@ -29,6 +31,7 @@ pub mod middleware;
 pub mod openapi;
 pub mod page;
 pub mod proto;
+pub mod sequences;
 pub mod status;
 pub mod thumbnails;
 pub mod workers;
@@ -36,7 +39,7 @@ pub mod workers;
 use crate::pipeline::Localizer;
 use axum::Router;
 use axum::extract::DefaultBodyLimit;
-use axum::routing::{get, post};
+use axum::routing::{delete, get, post};
 use config::Config;
 use errors::ApiError;
 use localize::Defaults;
@@ -57,7 +60,12 @@ pub struct AppState {
     pub defaults: Defaults,
     pub pool: WorkerPool,
     pub metrics: PrometheusHandle,
+    /// Live sequences of frames.
+    pub sequences: sequences::Sequences,
     localizer: OnceLock<Arc<Localizer>>,
+    /// The loaded map's topology for sequences (or why the configured one
+    /// does not fit the map).
+    topology: OnceLock<Result<crate::sequence::Topology, String>>,
     /// What loading (or bootstrapping) the map is doing now.
     loading: bootstrap::Progress,
     /// Map images made small for the page.
@@ -79,18 +87,23 @@ impl AppState {
                 min_features: s.min_features,
                 min_score: s.min_score,
                 deadline: None,
+                prior: None,
             },
             max_top_n: config.limits.max_top_n,
         };
         let pool = WorkerPool::new(config.worker_count(), config.limits.queue);
         let metrics = metrics::install();
         metrics::ready(false);
+        let sequences =
+            sequences::Sequences::new(config.sequence.max_sequences, config.sequence.idle());
         Ok(Arc::new(Self {
             config,
             defaults,
             pool,
             metrics,
+            sequences,
             localizer: OnceLock::new(),
+            topology: OnceLock::new(),
             loading: bootstrap::Progress::default(),
             thumbnails: thumbnails::ThumbnailCache::default(),
             shutting_down: AtomicBool::new(false),
@@ -110,6 +123,15 @@ impl AppState {
             queue = self.pool.queue_capacity(),
             "ready"
         );
+        let topology = crate::sequence::Topology::of(
+            self.config.sequence.topology,
+            localizer.map.meta().images,
+            localizer.map.positions(),
+        );
+        if let Err(e) = &topology {
+            tracing::error!("sequence.topology: {e}; requests with a sequence will be refused");
+        }
+        let _ = self.topology.set(topology);
         if self.localizer.set(Arc::new(localizer)).is_ok() {
             metrics::ready(true);
         }
@@ -122,6 +144,15 @@ impl AppState {
             ApiError::not_ready(format!("the map is still loading ({step}); retry later"))
                 .with_step(step)
         })
+    }
+
+    /// The map's topology for sequences, or 400 saying why there is none.
+    pub fn topology(&self) -> Result<&crate::sequence::Topology, ApiError> {
+        match self.topology.get() {
+            Some(Ok(t)) => Ok(t),
+            Some(Err(e)) => Err(ApiError::invalid_parameter("sequence", e)),
+            None => Err(ApiError::not_ready("the map is still loading; retry later")),
+        }
     }
 
     pub fn begin_shutdown(&self) {
@@ -144,6 +175,7 @@ pub fn router(state: Arc<AppState>) -> Router {
     };
     Router::new()
         .route("/localize", post(localize::localize))
+        .route("/sequences/{name}", delete(localize::delete_sequence))
         .route("/healthz", get(status::healthz))
         .route("/readyz", get(status::readyz))
         .route("/map", get(status::map))
@@ -205,11 +237,13 @@ pub async fn serve(
     tracing::info!("listening on http://{address}");
     let upkeep = {
         let handle = state.metrics.clone();
+        let upkeep_state = state.clone();
         tokio::spawn(async move {
             let mut tick = tokio::time::interval(Duration::from_secs(5));
             loop {
                 tick.tick().await;
                 handle.run_upkeep();
+                upkeep_state.sequences.sweep();
             }
         })
     };

@@ -8,8 +8,8 @@ use super::localize::{self, ImageUpload};
 use super::status::{self, MapInfo, Status};
 use super::{page, thumbnails};
 use crate::report::{
-    Candidate, CandidateMatches, FeatureUse, FullRace, ImageSize, Localization, MapIdentity,
-    RacePoint, RaceTrace, RuleReport, Timings,
+    Candidate, CandidateMatches, FeatureUse, FilteredCandidate, FullRace, ImageSize, Localization,
+    MapIdentity, RacePoint, RaceTrace, RuleReport, SequenceAnswer, Timings,
 };
 use crate::search::StopInfo;
 use crate::search::stop::{RULES, rule_names};
@@ -28,6 +28,7 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
     ),
     paths(
         localize::localize,
+        localize::delete_sequence,
         status::healthz,
         status::readyz,
         status::map,
@@ -41,7 +42,7 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
     components(schemas(
         Localization, Candidate, FeatureUse, RuleReport, StopInfo, ImageSize, Timings,
         MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload, Binary, RaceTrace,
-        RacePoint, FullRace, CandidateMatches,
+        RacePoint, FullRace, CandidateMatches, SequenceAnswer, FilteredCandidate,
     )),
     tags(
         (name = "localize", description = "Localize a query image against the loaded map."),

@@ -9,12 +9,15 @@ mod hoeffding;
 mod lossless;
 mod none;
 mod peak_mean;
+mod posterior;
 mod relative;
 mod stable_peak;
 mod verified;
 
+use super::prior::Prior;
 use super::vote::{Needs, VoteStats};
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// A rule instance for one query.
 pub trait StopRule: Send {
@@ -57,15 +60,21 @@ pub trait LeaderCheck {
 }
 
 /// What a rule may know about the search it runs in.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct RuleContext {
     /// Candidates the search returns.
     pub top_n: usize,
+    /// The search's prior over map images (a sequence's prediction, a pose
+    /// restriction), if it has one.
+    pub prior: Option<Arc<Prior>>,
 }
 
 impl Default for RuleContext {
     fn default() -> Self {
-        Self { top_n: 1 }
+        Self {
+            top_n: 1,
+            prior: None,
+        }
     }
 }
 
@@ -207,6 +216,7 @@ pub const RULES: &[RuleInfo] = &[
     lossless::INFO,
     confident::INFO,
     verified::INFO,
+    posterior::INFO,
 ];
 
 /// Look a rule up by name.

@@ -122,7 +122,10 @@ fn lossless_orders_the_whole_top_n() {
     voter.set_total(stream.len());
     let mut rule = RuleSpec::new("lossless", None)
         .unwrap()
-        .build(&RuleContext { top_n: 2 });
+        .build(&RuleContext {
+            top_n: 2,
+            ..Default::default()
+        });
     let mut stopped = None;
     for &w in &stream {
         voter.vote(w);

@@ -1,0 +1,486 @@
+//! `bowloc eval --sequence`: the queries, in list order, as the frames of one
+//! camera moving along the map (both shared datasets were recorded along a
+//! path), localized frame by frame and through the sequence filter
+//! ([`crate::sequence`]), with a few unrelated images injected into the
+//! sequence to measure how quickly the filter recovers.
+//!
+//! Four modes run on the same cached, pre-quantized tiles, for every
+//! vocabulary seed and random feature order (run):
+//!
+//! - `frame, full`: each frame alone, every feature (rule `none`);
+//! - `frame, STOP`: each frame alone with the stopping rule (its prior is
+//!   uniform);
+//! - `filter, full`: the filter, every feature;
+//! - `filter, STOP`: the filter, its prediction the prior of the stop.
+//!
+//! A frame alone answers its vote ranking; the filter answers its
+//! posterior's ranking. Recall@k counts the real frames with a match whose
+//! top k hold one; features are the share of each real frame's features
+//! voted, and tiles the share of its tiles extracted (the extraction the
+//! service would do). Injected frames count in none of these; after each,
+//! the recovery is the number of real frames until the filter's leader is
+//! a match again (1: the first frame after it).
+
+use super::cache;
+use super::tiles::Query;
+use super::{maps_of, quantize_queries, vocabularies};
+use crate::dataset::{Dataset, image_list};
+use crate::features::{ExtractConfig, TileGrid};
+use crate::index::MapIndex;
+use crate::search::{RuleSpec, SearchOptions};
+use crate::sequence::{Filter, SequenceModel, Topology, TopologyKind};
+use anyhow::Context;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::collections::HashSet;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// What to evaluate.
+#[derive(Debug, Clone)]
+pub struct SequenceEvalConfig {
+    pub dataset: PathBuf,
+    pub words: usize,
+    pub seeds: Vec<u64>,
+    /// Random feature orders per seed.
+    pub runs: u32,
+    pub extract: ExtractConfig,
+    pub tiles: TileGrid,
+    pub cache: PathBuf,
+    /// Where `sequence.json` and `sequence.md` go.
+    pub out: PathBuf,
+    pub model: SequenceModel,
+    /// The stopping rule of the `STOP` modes.
+    pub stop: RuleSpec,
+    /// Its warm-up.
+    pub min_features: usize,
+    /// Unrelated images (a list or a folder) to inject.
+    pub inject: Option<PathBuf>,
+    /// How many to inject, evenly spaced.
+    pub injections: usize,
+    pub command: String,
+}
+
+/// One mode's figures over one seed (means over runs).
+#[derive(Debug, Clone, Serialize)]
+pub struct ModeSeed {
+    pub seed: u64,
+    pub recall_at_1: f64,
+    pub recall_at_5: f64,
+    /// Mean share of a real frame's features voted.
+    pub features: f64,
+    /// Mean share of a real frame's tiles extracted.
+    pub tiles: f64,
+    /// Recovery after each injection (frames), every run; `None`: not
+    /// within the rest of the sequence.
+    pub recovery: Vec<Option<usize>>,
+}
+
+/// A mean over seeds with its spread and the worst seed.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Spread {
+    pub mean: f64,
+    pub std: f64,
+    pub min: f64,
+    pub max: f64,
+}
+
+impl Spread {
+    fn of(v: &[f64]) -> Self {
+        let n = v.len().max(1) as f64;
+        let mean = v.iter().sum::<f64>() / n;
+        let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+        Self {
+            mean,
+            std: var.sqrt(),
+            min: v.iter().copied().fold(f64::INFINITY, f64::min),
+            max: v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        }
+    }
+}
+
+/// One mode over every seed.
+#[derive(Debug, Clone, Serialize)]
+pub struct ModeReport {
+    pub mode: String,
+    pub filter: bool,
+    pub rule: String,
+    pub recall_at_1: Spread,
+    pub recall_at_5: Spread,
+    pub features: Spread,
+    pub tiles: Spread,
+    /// Largest recovery over every injection, seed and run (`None`: some
+    /// injection never recovered, or none was injected).
+    pub recovery_max: Option<usize>,
+    pub recovery_mean: Option<f64>,
+    pub per_seed: Vec<ModeSeed>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct SequenceReport {
+    pub command: String,
+    pub dataset: String,
+    pub frames: usize,
+    pub injected_at: Vec<usize>,
+    pub injected_images: Vec<String>,
+    pub runs: u32,
+    pub seeds: Vec<u64>,
+    pub words: usize,
+    pub tiles: String,
+    pub model: SequenceModel,
+    pub min_features: usize,
+    pub modes: Vec<ModeReport>,
+}
+
+/// A frame of the replayed sequence.
+#[derive(Clone, Copy)]
+enum Frame {
+    /// The query with this index.
+    Real(usize),
+    /// The injected image with this index.
+    Injected(usize),
+}
+
+/// What one pass over the sequence measured.
+struct Pass {
+    hits1: usize,
+    hits5: usize,
+    scored: usize,
+    features: f64,
+    tiles: f64,
+    frames: usize,
+    recovery: Vec<Option<usize>>,
+}
+
+struct Mode {
+    filter: bool,
+    rule: RuleSpec,
+    min_features: usize,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn pass(
+    map: &MapIndex,
+    queries: &[Query],
+    injected: &[Query],
+    frames: &[Frame],
+    truth: &[HashSet<u32>],
+    mode: &Mode,
+    model: &SequenceModel,
+    seed: u64,
+) -> Pass {
+    let topology =
+        Topology::of(TopologyKind::Order, map.meta().images, None).expect("order needs no poses");
+    let mut filter = Filter::new();
+    let mut p = Pass {
+        hits1: 0,
+        hits5: 0,
+        scored: 0,
+        features: 0.0,
+        tiles: 0.0,
+        frames: 0,
+        recovery: Vec::new(),
+    };
+    // injections whose recovery is still open: frames since
+    let mut open: Vec<usize> = Vec::new();
+    for (f, frame) in frames.iter().enumerate() {
+        let query = match *frame {
+            Frame::Real(q) => &queries[q],
+            Frame::Injected(i) if mode.filter => &injected[i],
+            Frame::Injected(_) => continue,
+        };
+        let mut options = SearchOptions {
+            rule: mode.rule.clone(),
+            top_n: 5,
+            seed: seed.wrapping_mul(1_000_003).wrapping_add(f as u64),
+            min_features: mode.min_features,
+            ..SearchOptions::default()
+        };
+        let prediction = mode.filter.then(|| filter.predict(model, &topology, None));
+        if let Some(pr) = &prediction {
+            options.prior = Some(Arc::new(pr.prior.clone()));
+        }
+        let replay = query.search(map, &options, false);
+        let ranked: Vec<u32> = match (&prediction, replay.outcome.posterior.clone()) {
+            (Some(pr), Some(post)) => {
+                let ids = post.top.iter().map(|e| e.0).collect();
+                filter.update(post, pr);
+                ids
+            }
+            _ => replay.outcome.candidates.iter().map(|c| c.id).collect(),
+        };
+        let Frame::Real(q) = *frame else {
+            open.push(0);
+            continue;
+        };
+        let n = query.words.len().max(1) as f64;
+        p.features += replay.outcome.features_used as f64 / n;
+        p.tiles += replay.tiles as f64 / query.tiles.len().max(1) as f64;
+        p.frames += 1;
+        let right = |k: usize| ranked.iter().take(k).any(|j| truth[q].contains(j));
+        if !truth[q].is_empty() {
+            p.scored += 1;
+            p.hits1 += right(1) as usize;
+            p.hits5 += right(5) as usize;
+        }
+        for since in &mut open {
+            *since += 1;
+        }
+        if right(1) {
+            p.recovery.extend(open.drain(..).map(Some));
+        }
+    }
+    p.recovery.extend(open.drain(..).map(|_| None));
+    p
+}
+
+/// Run the sequence evaluation, write its outputs, and return it.
+pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
+    config.model.check().map_err(anyhow::Error::msg)?;
+    anyhow::ensure!(config.runs >= 1, "--runs must be at least 1");
+    anyhow::ensure!(
+        !config.seeds.is_empty(),
+        "give at least one vocabulary seed"
+    );
+    let dataset = Dataset::open(&config.dataset)?;
+    let map_desc = cache::descriptors(
+        &config.cache.join("map.bowdesc"),
+        &dataset.map,
+        &config.extract,
+        TileGrid::WHOLE,
+        "extracting map",
+    )?;
+    let query_desc = cache::descriptors(
+        &config
+            .cache
+            .join(format!("queries-{}.bowdesc", config.tiles)),
+        &dataset.queries,
+        &config.extract,
+        config.tiles,
+        "extracting queries",
+    )?;
+    let inject_images = match &config.inject {
+        Some(p) if config.injections > 0 => {
+            image_list(p).with_context(|| format!("--inject {}", p.display()))?
+        }
+        _ => Vec::new(),
+    };
+    anyhow::ensure!(
+        config.injections == 0 || !inject_images.is_empty(),
+        "--injections {} needs --inject with images",
+        config.injections
+    );
+    let inject_desc = (!inject_images.is_empty())
+        .then(|| {
+            cache::descriptors(
+                &config
+                    .cache
+                    .join(format!("injected-{}.bowdesc", config.tiles)),
+                &inject_images,
+                &config.extract,
+                config.tiles,
+                "extracting injected images",
+            )
+        })
+        .transpose()?;
+    let vocabs = vocabularies(&config.cache, config.words, &config.seeds, None, &map_desc)?;
+    let maps = maps_of(&config.cache, &vocabs, &map_desc, &dataset.name)?;
+    crate::features::set_opencv_threads(1);
+
+    // the sequence: queries in order, injections evenly spaced
+    let n = dataset.queries.len();
+    let injected_at: Vec<usize> = (0..config.injections)
+        .map(|k| (k + 1) * n / (config.injections + 1))
+        .collect();
+    let mut frames = Vec::with_capacity(n + injected_at.len());
+    for q in 0..n {
+        if let Some(k) = injected_at.iter().position(|&at| at == q) {
+            frames.push(Frame::Injected(k % inject_images.len().max(1)));
+        }
+        frames.push(Frame::Real(q));
+    }
+    let truth: Vec<HashSet<u32>> = dataset.truth.clone();
+
+    let full = RuleSpec::new("none", None).expect("built-in rule");
+    let modes = [
+        Mode {
+            filter: false,
+            rule: full.clone(),
+            min_features: 0,
+        },
+        Mode {
+            filter: false,
+            rule: config.stop.clone(),
+            min_features: config.min_features,
+        },
+        Mode {
+            filter: true,
+            rule: full,
+            min_features: 0,
+        },
+        Mode {
+            filter: true,
+            rule: config.stop.clone(),
+            min_features: config.min_features,
+        },
+    ];
+    let mut per_mode: Vec<Vec<ModeSeed>> = vec![Vec::new(); modes.len()];
+    for (v, map) in vocabs.iter().zip(&maps) {
+        let seed = v.meta().seed;
+        let quantizer = v.exact_quantizer();
+        let (queries, _) = quantize_queries(
+            &query_desc,
+            &quantizer,
+            &format!("quantizing (seed {seed})"),
+        );
+        let injected: Vec<Query> = match &inject_desc {
+            Some(d) => quantize_queries(d, &quantizer, "quantizing injected images").0,
+            None => Vec::new(),
+        };
+        let jobs: Vec<(usize, u32)> = (0..modes.len())
+            .flat_map(|m| (0..config.runs).map(move |r| (m, r)))
+            .collect();
+        let passes: Vec<(usize, Pass)> = jobs
+            .par_iter()
+            .map(|&(m, r)| {
+                let p = pass(
+                    map,
+                    &queries,
+                    &injected,
+                    &frames,
+                    &truth,
+                    &modes[m],
+                    &config.model,
+                    r as u64 + 1,
+                );
+                (m, p)
+            })
+            .collect();
+        for (m, mode_seeds) in per_mode.iter_mut().enumerate() {
+            let mine: Vec<&Pass> = passes.iter().filter(|e| e.0 == m).map(|e| &e.1).collect();
+            let mean = |f: &dyn Fn(&Pass) -> f64| {
+                mine.iter().map(|p| f(p)).sum::<f64>() / mine.len() as f64
+            };
+            mode_seeds.push(ModeSeed {
+                seed,
+                recall_at_1: mean(&|p| p.hits1 as f64 / p.scored.max(1) as f64),
+                recall_at_5: mean(&|p| p.hits5 as f64 / p.scored.max(1) as f64),
+                features: mean(&|p| p.features / p.frames.max(1) as f64),
+                tiles: mean(&|p| p.tiles / p.frames.max(1) as f64),
+                recovery: mine
+                    .iter()
+                    .flat_map(|p| p.recovery.iter().copied())
+                    .collect(),
+            });
+        }
+    }
+    let reports: Vec<ModeReport> = modes
+        .iter()
+        .zip(per_mode)
+        .map(|(mode, seeds)| {
+            let col =
+                |f: fn(&ModeSeed) -> f64| Spread::of(&seeds.iter().map(f).collect::<Vec<_>>());
+            let recoveries: Vec<Option<usize>> = seeds
+                .iter()
+                .flat_map(|s| s.recovery.iter().copied())
+                .collect();
+            let all: Option<Vec<usize>> = recoveries.iter().copied().collect();
+            let all = all.filter(|a| !a.is_empty());
+            let rule = if mode.rule.name == "none" {
+                "full".to_owned()
+            } else {
+                format!("{} w={}", mode.rule, mode.min_features)
+            };
+            ModeReport {
+                mode: format!("{}, {rule}", if mode.filter { "filter" } else { "frame" }),
+                filter: mode.filter,
+                rule,
+                recall_at_1: col(|s| s.recall_at_1),
+                recall_at_5: col(|s| s.recall_at_5),
+                features: col(|s| s.features),
+                tiles: col(|s| s.tiles),
+                recovery_max: all.as_ref().and_then(|a| a.iter().copied().max()),
+                recovery_mean: all
+                    .as_ref()
+                    .map(|a| a.iter().sum::<usize>() as f64 / a.len() as f64),
+                per_seed: seeds,
+            }
+        })
+        .collect();
+    let report = SequenceReport {
+        command: config.command.clone(),
+        dataset: dataset.name.clone(),
+        frames: n,
+        injected_images: injected_at
+            .iter()
+            .enumerate()
+            .map(|(k, _)| inject_images[k % inject_images.len()].name.clone())
+            .collect(),
+        injected_at,
+        runs: config.runs,
+        seeds: vocabs.iter().map(|v| v.meta().seed).collect(),
+        words: config.words,
+        tiles: config.tiles.to_string(),
+        model: config.model,
+        min_features: config.min_features,
+        modes: reports,
+    };
+    std::fs::create_dir_all(&config.out)
+        .with_context(|| format!("{}: cannot create", config.out.display()))?;
+    std::fs::write(
+        config.out.join("sequence.json"),
+        serde_json::to_string_pretty(&report)?,
+    )?;
+    std::fs::write(config.out.join("sequence.md"), markdown(&report))?;
+    Ok(report)
+}
+
+/// The report as a markdown table (means ± std over seeds, worst seed).
+pub fn markdown(r: &SequenceReport) -> String {
+    let pct = |s: &Spread| {
+        format!(
+            "{:.1} ± {:.1} (worst {:.1})",
+            100.0 * s.mean,
+            100.0 * s.std,
+            100.0 * s.min
+        )
+    };
+    let mut out = format!(
+        "{}: {} frames in order, {} injected at {:?}; {} vocabulary seeds {:?} (K = {}), {} runs; tiles {}\n\n\
+         | mode | recall@1 % | recall@5 % | features % | tiles % | recovery (max / mean frames) |\n\
+         | --- | --- | --- | --- | --- | --- |\n",
+        r.dataset,
+        r.frames,
+        r.injected_at.len(),
+        r.injected_at,
+        r.seeds.len(),
+        r.seeds,
+        r.words,
+        r.runs,
+        r.tiles
+    );
+    for m in &r.modes {
+        let worst_features = format!(
+            "{:.1} ± {:.1} (worst {:.1})",
+            100.0 * m.features.mean,
+            100.0 * m.features.std,
+            100.0 * m.features.max
+        );
+        let recovery = match (m.filter, m.recovery_max, m.recovery_mean) {
+            (false, _, _) => "–".to_owned(),
+            (true, Some(max), Some(mean)) => format!("{max} / {mean:.2}"),
+            (true, _, _) if r.injected_at.is_empty() => "–".to_owned(),
+            (true, _, _) => "not always".to_owned(),
+        };
+        out += &format!(
+            "| {} | {} | {} | {} | {:.1} | {} |\n",
+            m.mode,
+            pct(&m.recall_at_1),
+            pct(&m.recall_at_5),
+            worst_features,
+            100.0 * m.tiles.mean,
+            recovery
+        );
+    }
+    out
+}
