@@ -5,7 +5,7 @@
 //! document.
 
 use crate::features::TileGrid;
-use crate::index::{ImageInfo, MapIndex};
+use crate::index::{ImageInfo, MapRead};
 use crate::search::{RuleSpec, SearchOutcome, StopInfo};
 use serde::Serialize;
 use std::collections::HashMap;
@@ -186,7 +186,7 @@ pub struct MapIdentity {
 }
 
 impl MapIdentity {
-    pub fn of(map: &MapIndex) -> Self {
+    pub fn of(map: &dyn MapRead) -> Self {
         let m = map.meta();
         Self {
             name: m.name.clone(),
@@ -245,7 +245,7 @@ pub struct EdgeTimings {
 
 impl Localization {
     pub fn new(
-        map: &MapIndex,
+        map: &dyn MapRead,
         rule: &RuleSpec,
         seed: u64,
         image: ImageSize,
@@ -290,7 +290,7 @@ impl Localization {
     /// least `min_score` (inliers), and count `elapsed` as verification time.
     pub fn verified(
         mut self,
-        map: &MapIndex,
+        map: &dyn MapRead,
         reranked: &[crate::geometry::verify::Reranked],
         top_n: usize,
         min_score: f32,

@@ -297,7 +297,7 @@ fn body_error(
 }
 
 /// The image bytes of the request.
-async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiError> {
+pub(super) async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiError> {
     let limit = state.config.limits.body_bytes;
     let kind = body_kind(request.headers())?;
     let declared = request
@@ -431,14 +431,7 @@ pub async fn localize(
             Ok(localizer.localize_tiled(&image, &options, tiles, verify)?)
         })
         .await
-        .map_err(|e| match e {
-            PoolError::QueueFull => ApiError::overloaded(state.pool.queue_capacity()),
-            PoolError::TimedOut => ApiError::queue_timeout(),
-            PoolError::Panicked(m) => {
-                tracing::error!("localization panicked: {m}");
-                ApiError::internal("the query failed unexpectedly")
-            }
-        })??;
+        .map_err(|e| pool_error(&state, e, "localization"))??;
     if answer.stop.kind == crate::search::StopKind::Deadline && answer.features.used == 0 {
         return Err(ApiError::deadline_exceeded()); // the deadline passed before any vote
     }
@@ -451,6 +444,19 @@ pub async fn localize(
     let mut response = encode(&answer, format);
     response.extensions_mut().insert(summary);
     Ok(response)
+}
+
+/// The answer when the worker pool did not run a job (`what`: its name in
+/// the log).
+pub(super) fn pool_error(state: &AppState, e: PoolError, what: &str) -> ApiError {
+    match e {
+        PoolError::QueueFull => ApiError::overloaded(state.pool.queue_capacity()),
+        PoolError::TimedOut => ApiError::queue_timeout(),
+        PoolError::Panicked(m) => {
+            tracing::error!("{what} panicked: {m}");
+            ApiError::internal(format!("the {what} failed unexpectedly"))
+        }
+    }
 }
 
 fn encode(answer: &Localization, format: Format) -> Response {
