@@ -161,7 +161,7 @@ fn every_acknowledged_change_survives_sigkill_and_nothing_else_appears() {
     model.lock().unwrap().images = listed(addr);
     let mut child = Some((child, addr));
     let mut rng = ChaCha8Rng::seed_from_u64(15);
-    let rounds = 14;
+    let rounds = 30;
     let mut compactions = 0;
     for round in 0..rounds {
         let (mut server, addr) = child.take().unwrap();

@@ -31,8 +31,10 @@ pub const MAX_PLACE_LEN: usize = 1024;
 /// Most images one page of `GET /images` lists.
 pub const MAX_PAGE: usize = 1000;
 
-/// An id is 1 to 255 characters among letters, digits and `. _ ~ / -`
-/// (a slash is sent as `%2F`), not starting with `/`.
+/// A new image's id is 1 to 255 characters among letters, digits and
+/// `. _ ~ / -` (a slash is sent as `%2F`), not starting with `/`. (The
+/// images of a map file keep their names from its image list, whatever
+/// they are, and are addressed by them.)
 pub fn check_id(id: &str) -> Result<(), ApiError> {
     let ok = !id.is_empty()
         && id.len() <= MAX_ID_LEN
@@ -147,6 +149,19 @@ fn write_error(e: WriteError) -> ApiError {
         e @ (WriteError::Log(_) | WriteError::Broken(_)) => {
             tracing::error!("map write failed: {e}");
             ApiError::storage_unavailable(e.to_string())
+        }
+    }
+}
+
+/// The index of image `id`: any name in the map is an id (a map built from
+/// an image list keeps the list's names, whatever they are); an unknown id
+/// is 404, or 400 when it could not even be a new id.
+fn existing(s: &Snapshot, id: &str) -> Result<u32, ApiError> {
+    match s.id_of(id) {
+        Some(index) => Ok(index),
+        None => {
+            check_id(id)?;
+            Err(image_not_found(id))
         }
     }
 }
@@ -387,7 +402,7 @@ pub async fn put_image(
     security(("bearer" = [])),
     responses(
         (status = 200, description = "Removed; queries starting after the answer no longer find it.", body = Written),
-        (status = 400, description = "Bad id (`invalid_id`).", body = ErrorBody),
+        (status = 400, description = "No such image, and not a valid id (`invalid_id`).", body = ErrorBody),
         (status = 401, description = "No bearer token (`unauthorized`).", body = ErrorBody),
         (status = 403, description = "Wrong token (`forbidden`), or no token configured (`writes_disabled`).", body = ErrorBody),
         (status = 404, description = "No image of this id (`image_not_found`).", body = ErrorBody),
@@ -400,7 +415,7 @@ pub async fn delete_image(
     Path(id): Path<String>,
 ) -> Result<Json<Written>, ApiError> {
     let localizer = state.localizer()?;
-    check_id(&id)?;
+    existing(&localizer.map.snapshot(), &id)?;
     let _claim = state.writing.claim(&id)?;
     let writer = localizer.clone();
     let name = id.clone();
@@ -508,7 +523,7 @@ pub async fn list_images(
     params(("id" = String, Path, description = "The image's id (its name in the map).")),
     responses(
         (status = 200, description = "The image.", body = ImageItem),
-        (status = 400, description = "Bad id (`invalid_id`).", body = ErrorBody),
+        (status = 400, description = "No such image, and not a valid id (`invalid_id`).", body = ErrorBody),
         (status = 404, description = "No image of this id (`image_not_found`).", body = ErrorBody),
         (status = 503, description = "Not loaded yet (`not_ready`).", body = ErrorBody),
     )
@@ -518,8 +533,7 @@ pub async fn get_image(
     Path(id): Path<String>,
 ) -> Result<Json<ImageItem>, ApiError> {
     let s = state.localizer()?.map.snapshot();
-    check_id(&id)?;
-    let index = s.id_of(&id).ok_or_else(|| image_not_found(&id))?;
+    let index = existing(&s, &id)?;
     Ok(Json(ImageItem::of(&s, index)))
 }
 
