@@ -247,6 +247,7 @@ pub struct Written {
 #[into_params(parameter_in = Query)]
 pub struct PutParams {
     /// Place label (at most 1024 bytes).
+    #[param(max_length = 1024)]
     pub place: Option<String>,
 }
 
