@@ -4,7 +4,8 @@
 //! 1. adds excluding SIFT: weighting, the change log's append and fsync,
 //!    publishing the snapshot — 1 000 adds (10 % of the map), median and
 //!    90th percentile, and the median of the first and last 100 (the cost of
-//!    an add must not grow with the changes before it);
+//!    an add must not grow with the changes before it); and the same change
+//!    applied in memory only (no log), to tell the two parts apart;
 //! 2. search latency (words known: no SIFT, no quantization) of 1 000-feature
 //!    queries, rule `none` (every feature votes) and the default rule,
 //!    with those 1 000 images in the change log against the compacted map,
@@ -71,6 +72,7 @@ fn main() {
 
     // 1. adds
     let mut times = Vec::with_capacity(added);
+    let mut in_memory = Vec::with_capacity(added);
     for k in 0..added {
         let words = zipf_query(WORDS, FEATURES, 1_000_000 + k as u64);
         let change = Change::Add(NewImage {
@@ -80,10 +82,29 @@ fn main() {
             features: pack_image(&words, &kps),
             added_at_ms: 0,
         });
+        // the same change applied in memory only (no log): the part
+        // before the append and fsync
+        let record = bowloc::live::Record {
+            generation: u64::MAX,
+            change: change.clone(),
+        };
+        let started = Instant::now();
+        let mut copy = bowloc::live::Snapshot::clone(&live.snapshot());
+        copy.apply(&record, usize::MAX).unwrap();
+        in_memory.push(started.elapsed());
+        drop(copy);
         let started = Instant::now();
         live.apply(change).unwrap();
         times.push(started.elapsed());
     }
+    let mem_first = median(&mut in_memory[..100.min(added)].to_vec());
+    let mem_last = median(&mut in_memory[added.saturating_sub(100)..].to_vec());
+    println!(
+        "add in memory (weigh, copy-on-write, no log): median {:.3} ms; first 100 median {:.3} ms, last 100 median {:.3} ms",
+        ms(median(&mut in_memory)),
+        ms(mem_first),
+        ms(mem_last)
+    );
     let first = median(&mut times[..100.min(added)].to_vec());
     let last = median(&mut times[added.saturating_sub(100)..].to_vec());
     let mut all = times.clone();
@@ -114,6 +135,15 @@ fn main() {
             ..SearchOptions::default()
         };
         let (mut live_t, mut file_t) = (Vec::new(), Vec::new());
+        // the snapshot's flat copy of the added postings, built once
+        let started = Instant::now();
+        black_box(with_changes.overlay().flat());
+        if rule == "none" {
+            println!(
+                "flat copy of the {added} added images' postings, built by a snapshot's first query: {:.3} ms",
+                ms(started.elapsed())
+            );
+        }
         for round in 0..3 {
             for q in &queries {
                 // alternate which goes first

@@ -8,9 +8,35 @@
 //! it touches, so the cost of a change does not grow with the number of
 //! changes before it. The removed set is a plain bitset (copied on a removal:
 //! one bit per image), so a vote tests it with one load.
+//!
+//! Walking a persistent list costs more per entry than a flat array, so the
+//! voter reads the added postings from a flat copy ([`Flat`], CSR like the
+//! file's), built by the first query of a snapshot and shared by every
+//! later query of it: writes never build it, and a query builds it at most
+//! once per write (in time linear in the added postings).
 
 use imbl::Vector;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
+
+/// The added postings in CSR layout: word w's entries are
+/// `entries[offsets[w]..offsets[w + 1]]`, (image id, d̂_j(w)), ids ascending.
+#[derive(Debug, Default)]
+pub struct Flat {
+    offsets: Vec<u32>,
+    entries: Vec<(u32, f32)>,
+}
+
+impl Flat {
+    /// Word `w`'s entries (empty for an unknown word).
+    #[inline]
+    pub fn list(&self, w: u32) -> &[(u32, f32)] {
+        let w = w as usize;
+        match (self.offsets.get(w), self.offsets.get(w + 1)) {
+            (Some(&a), Some(&b)) => self.entries.get(a as usize..b as usize).unwrap_or(&[]),
+            _ => &[],
+        }
+    }
+}
 
 /// Added postings and removed ids over a map of `first` images.
 #[derive(Clone, Default)]
@@ -29,6 +55,8 @@ pub struct Overlay {
     vote_cap: f32,
     /// Postings entries of added images.
     entries: usize,
+    /// The flat copy of `postings`, once a query asked for it.
+    flat: Arc<OnceLock<Flat>>,
 }
 
 impl Overlay {
@@ -88,6 +116,7 @@ impl Overlay {
         }
         self.image_max.push_back(image_max);
         self.vote_cap = self.vote_cap.max(image_max);
+        self.flat = Arc::default();
         id
     }
 
@@ -126,6 +155,23 @@ impl Overlay {
             .flat_map(|l| l.leaves())
     }
 
+    /// The added postings as flat arrays: built on first use, then shared
+    /// by every clone until the next add.
+    pub fn flat(&self) -> &Flat {
+        self.flat.get_or_init(|| {
+            let mut offsets = Vec::with_capacity(self.postings.len() + 1);
+            let mut entries = Vec::with_capacity(self.entries);
+            offsets.push(0);
+            for list in &self.postings {
+                for chunk in list.leaves() {
+                    entries.extend_from_slice(chunk);
+                }
+                offsets.push(entries.len() as u32);
+            }
+            Flat { offsets, entries }
+        })
+    }
+
     /// Largest vote image `id` can get from one feature, for an added image.
     pub fn image_max(&self, id: u32) -> Option<f32> {
         let k = id.checked_sub(self.first)?;
@@ -153,6 +199,11 @@ mod tests {
         let listed: Vec<(u32, f32)> = o.list(1).flatten().copied().collect();
         assert_eq!(listed, vec![(3, 0.6), (4, 1.0)]);
         assert_eq!(o.list(0).flatten().count(), 0);
+        assert_eq!(o.flat().list(1), &listed[..]);
+        assert_eq!(o.flat().list(3), &[(3, 0.8)]);
+        assert!(o.flat().list(0).is_empty() && o.flat().list(99).is_empty());
+        o.add(&[(1, 0.5)], 0.5);
+        assert_eq!(o.flat().list(1).len(), 3, "an add makes a new flat copy");
         assert_eq!(o.list(99).flatten().count(), 0);
         // the clone taken before is unchanged
         assert_eq!(before.list(1).flatten().count(), 0);

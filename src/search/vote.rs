@@ -9,7 +9,7 @@
 //! A map with changes ([`Overlay`]) is voted the same way: w's list in the
 //! file, skipping removed images, then w's list of added images.
 
-use crate::index::overlay::is_set;
+use crate::index::overlay::{Flat, is_set};
 use crate::index::{MapView, Overlay, Postings};
 
 /// Running statistics of the histogram after `features` votes.
@@ -140,6 +140,8 @@ pub struct Voter<'a> {
     idf: &'a [f32],
     image_max: &'a [f32],
     overlay: Option<&'a Overlay>,
+    /// The overlay's added postings, flat.
+    added: Option<&'a Flat>,
     /// Removed ids (bitset; empty without an overlay).
     removed: &'a [u64],
     hist: Vec<f32>,
@@ -171,6 +173,7 @@ impl<'a> Voter<'a> {
             idf: map.idf,
             image_max: map.image_max,
             overlay,
+            added: overlay.map(|o| o.flat()),
             removed: overlay.map_or(&[], |o| o.removed_bits()),
             hist: vec![0.0; ids],
             touched: Vec::new(),
@@ -218,12 +221,10 @@ impl<'a> Voter<'a> {
                 }
             }
         }
-        if let Some(overlay) = self.overlay {
-            for chunk in overlay.list(w) {
-                for &(j, d) in chunk {
-                    if !is_set(self.removed, j) {
-                        added += self.cast(j, factor * d);
-                    }
+        if let Some(flat) = self.added {
+            for &(j, d) in flat.list(w) {
+                if !is_set(self.removed, j) {
+                    added += self.cast(j, factor * d);
                 }
             }
         }
