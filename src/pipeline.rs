@@ -4,6 +4,7 @@
 
 use crate::dataset::ImageRef;
 use crate::features::fit::OpenCvFit;
+use cpu_time::ThreadTime;
 use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
 use crate::geometry::Keypoint;
 use crate::geometry::verify::{LeaderVerifier, VerifyParams, rerank, with_keypoints};
@@ -39,9 +40,9 @@ pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
 pub struct Extracted {
     /// Keypoints and descriptor rows tile by tile, in grid order.
     pub features: Features,
-    /// Reading and decoding the file.
+    /// Reading and decoding the file (thread CPU time).
     pub decode: Duration,
-    /// Feature extraction on the decoded image (all tiles).
+    /// Feature extraction on the decoded image, all tiles (thread CPU time).
     pub extract: Duration,
     /// Each tile in grid order: its features, its share of the image's area
     /// and its extraction time (one tile when extracted whole).
@@ -56,7 +57,8 @@ pub struct TileCost {
     pub extract: Duration,
 }
 
-/// Extract a decoded image tile by tile in grid order, timing each tile.
+/// Extract a decoded image tile by tile in grid order, timing each tile by
+/// the thread's CPU time (OpenCV runs on the calling thread here).
 pub fn extract_tiled(
     image: &features::GrayImage,
     config: &ExtractConfig,
@@ -67,7 +69,7 @@ pub fn extract_tiled(
     let mut costs = Vec::with_capacity(tiles.total());
     let mut area = 0.0;
     loop {
-        let started = Instant::now();
+        let started = ThreadTime::now();
         let Some(tile) = tiles.next_tile() else { break };
         let tile = tile?;
         let share = tiles.area_extracted();
@@ -106,7 +108,10 @@ pub fn extract_all(
 }
 
 /// [`extract_all`], tile by tile with `grid`, keeping how long each image
-/// took to decode and each tile to extract.
+/// took to decode and each tile to extract. The times are CPU time of the
+/// thread doing the work (one image per thread, OpenCV on one thread), so
+/// they price the work as a quiet machine would even when other processes
+/// share the cores: wall time there would charge for the waiting too.
 pub fn extract_all_timed(
     images: &[ImageRef],
     config: &ExtractConfig,
@@ -120,7 +125,7 @@ pub fn extract_all_timed(
     let results: Vec<Result<Extracted, FeatureError>> = images
         .par_iter()
         .map(|image| {
-            let started = Instant::now();
+            let started = ThreadTime::now();
             let r = features::decode_file(&image.path, limits).and_then(|decoded| {
                 let read = started.elapsed();
                 let (features, tiles) = extract_tiled(&decoded, config, grid)?;
@@ -473,7 +478,7 @@ impl Localizer {
             height: image.height(),
         };
         let mut tiles = Tiles::new(&image, &self.extract, grid, |n| {
-            search::permute::tile_order(n, options.seed)
+            search::permute::tile_order(n, grid.coarse, options.seed)
         })?;
         let mut extract = decoded.elapsed();
         let quantizer = self.vocab.quantizer(self.quantizer);

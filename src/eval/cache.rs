@@ -27,8 +27,9 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 const MAGIC: [u8; 8] = *b"BOWLOCDE";
-/// 2: keypoints beside the descriptors; 3: tiles and their times.
-const VERSION: u32 = 3;
+/// 2: keypoints beside the descriptors; 3: tiles and their times; 4: the
+/// times are thread CPU time.
+const VERSION: u32 = 4;
 /// Descriptor width (SIFT).
 const DIM: usize = 128;
 /// Values per keypoint row: x, y, size, angle, response.
@@ -155,6 +156,7 @@ impl DescriptorSet {
             keypoints: self.keypoints(i),
             fixed_ms: (self.extract_ms(i) - in_tiles).max(0.0) as f32,
             tiles,
+            coarse_first: self.meta.grid.coarse,
             geometry: None,
         }
     }

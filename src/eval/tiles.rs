@@ -36,6 +36,8 @@ pub struct Query {
     /// Empty: the whole image as one tile that cost nothing to extract.
     pub tiles: Vec<Tile>,
     pub fixed_ms: f32,
+    /// Tile 0 is a coarse pass, extracted first ([`crate::features::TileGrid::coarse`]).
+    pub coarse_first: bool,
     /// How to verify it geometrically (the `verified` stop and re-ranking).
     pub geometry: Option<Arc<Geometry>>,
 }
@@ -93,7 +95,7 @@ impl Query {
         let order: Vec<usize> = if tiles.len() == 1 {
             vec![0]
         } else {
-            permute::tile_order(tiles.len(), options.seed)
+            permute::tile_order(tiles.len(), self.coarse_first, options.seed)
                 .into_iter()
                 .map(|t| t as usize)
                 .collect()

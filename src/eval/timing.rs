@@ -2,12 +2,16 @@
 //! query's descriptors were extracted, kept in the cache), quantization (the
 //! real blocked quantizer timed over all of the query's descriptors once,
 //! then charged per feature used) and voting (timed inside the search), with
-//! their median and 95th percentile over queries.
+//! their median and 95th percentile over queries. Extraction and
+//! quantization are timed by the working thread's CPU time, so figures taken
+//! while other processes share the cores price the work as a quiet machine
+//! would; voting is timed on the wall clock inside the search (a small
+//! share of a request).
 
 use crate::quantize::Quantizer;
 use ndarray::{ArrayView2, Axis};
 use serde::Serialize;
-use std::time::Instant;
+use cpu_time::ThreadTime;
 
 /// A query's words and what quantizing one of its features cost.
 #[derive(Debug, Clone)]
@@ -19,8 +23,8 @@ pub struct QueryWords {
 }
 
 /// Quantize every row of `descriptors` in blocks of `block` rows, as the
-/// search does. The pass runs twice and the faster one is kept, so a
-/// preemption by another process is not charged to quantization.
+/// search does, timed by the thread's CPU time. The pass runs twice and the
+/// faster one is kept (the first warms the caches).
 pub fn quantize_timed(
     quantizer: &dyn Quantizer,
     descriptors: ArrayView2<'_, f32>,
@@ -29,7 +33,7 @@ pub fn quantize_timed(
     let mut words = vec![0u32; descriptors.nrows()];
     let mut fastest = f64::INFINITY;
     for _ in 0..2 {
-        let started = Instant::now();
+        let started = ThreadTime::now();
         for (rows, out) in descriptors
             .axis_chunks_iter(Axis(0), block.max(1))
             .zip(words.chunks_mut(block.max(1)))

@@ -85,13 +85,15 @@ impl Frame {
 
     /// Detect and describe inside `region` (x, y, width, height, clipped to
     /// the frame), keeping only keypoints whose centre lies in `core` (frame
-    /// coordinates, half-open). Keypoints come back in frame coordinates,
-    /// strongest first, at most `cap` of them (0 = all).
+    /// coordinates, half-open) and whose scale `scales` admits. Keypoints come
+    /// back in frame coordinates, strongest first, at most `cap` of them
+    /// (0 = all).
     pub fn detect(
         &mut self,
         region: (u32, u32, u32, u32),
         core: (u32, u32, u32, u32),
         cap: usize,
+        scales: Scales,
     ) -> Result<Features, FeatureError> {
         let (fw, fh) = self.size();
         let x0 = region.0.min(fw);
@@ -102,64 +104,128 @@ impl Frame {
             return Ok(Features::empty());
         }
         let whole = (x0, y0, w, h) == (0, 0, fw, fh);
-        let roi;
-        let input: &Mat = if whole {
-            &self.mat
-        } else {
-            roi = Mat::roi(
-                &self.mat,
-                Rect::new(x0 as i32, y0 as i32, w as i32, h as i32),
-            )?
-            .try_clone()?;
-            &roi
+        let roi = match whole {
+            true => None,
+            false => Some(
+                Mat::roi(
+                    &self.mat,
+                    Rect::new(x0 as i32, y0 as i32, w as i32, h as i32),
+                )?
+                .try_clone()?,
+            ),
         };
-        let mut keypoints = Vector::<KeyPoint>::new();
-        let mut raw = Mat::default();
-        self.sift
-            .detect_and_compute(input, &no_array(), &mut keypoints, &mut raw, false)?;
-        let rows = raw.rows().max(0) as usize;
-        if rows == 0 {
-            return Ok(Features::empty());
-        }
-        let cols = raw.cols() as usize;
-        let data: &[f32] = raw.data_typed()?;
         let (cx0, cy0) = (core.0 as f32, core.1 as f32);
         let (cx1, cy1) = (cx0 + core.2 as f32, cy0 + core.3 as f32);
-        let mut kept: Vec<(Keypoint, usize)> = keypoints
-            .iter()
-            .take(rows)
-            .enumerate()
-            .map(|(i, k)| {
-                let p = k.pt();
-                let kp = Keypoint {
-                    x: p.x + x0 as f32,
-                    y: p.y + y0 as f32,
-                    size: k.size(),
-                    angle: k.angle(),
-                    response: k.response(),
-                };
-                (kp, i)
-            })
-            .filter(|(k, _)| k.x >= cx0 && k.x < cx1 && k.y >= cy0 && k.y < cy1)
-            .collect();
-        // Strongest first (stable, so equal responses keep OpenCV's order),
-        // then cap exactly: OpenCV's own cap keeps ties with the weakest.
-        kept.sort_by(|a, b| b.0.response.total_cmp(&a.0.response));
-        if cap > 0 {
-            kept.truncate(cap);
-        }
-        let mut descriptors = Array2::<f32>::zeros((kept.len(), cols));
-        for (mut row, (_, i)) in descriptors.rows_mut().into_iter().zip(&kept) {
-            row.assign(&ndarray::ArrayView1::from(&data[i * cols..(i + 1) * cols]));
-        }
-        if self.rootsift {
-            rootsift(&mut descriptors);
-        }
-        Ok(Features {
-            keypoints: kept.into_iter().map(|(k, _)| k).collect(),
-            descriptors,
-        })
+        let place = |k: &KeyPoint| {
+            let p = k.pt();
+            let kp = Keypoint {
+                x: p.x + x0 as f32,
+                y: p.y + y0 as f32,
+                size: k.size(),
+                angle: k.angle(),
+                response: k.response(),
+            };
+            let inside = kp.x >= cx0 && kp.x < cx1 && kp.y >= cy0 && kp.y < cy1;
+            (inside && scales.admits(k)).then_some(kp)
+        };
+        let input = roi.as_ref().unwrap_or(&self.mat);
+        describe(&mut self.sift, input, place, cap, self.rootsift)
     }
+
+    /// Detect and describe on the whole frame downscaled to half its size:
+    /// the keypoints of the coarser scales at about a quarter of the cost,
+    /// returned in frame coordinates.
+    pub fn detect_halved(&mut self, cap: usize) -> Result<Features, FeatureError> {
+        let (fw, fh) = self.size();
+        let (hw, hh) = (fw.div_ceil(2), fh.div_ceil(2));
+        if hw < 2 || hh < 2 {
+            return Ok(Features::empty());
+        }
+        let mut half = Mat::default();
+        opencv::imgproc::resize(
+            &self.mat,
+            &mut half,
+            Size::new(hw as i32, hh as i32),
+            0.0,
+            0.0,
+            opencv::imgproc::INTER_AREA,
+        )?;
+        let (sx, sy) = (fw as f32 / hw as f32, fh as f32 / hh as f32);
+        let place = |k: &KeyPoint| {
+            let p = k.pt();
+            Some(Keypoint {
+                x: (p.x + 0.5) * sx - 0.5,
+                y: (p.y + 0.5) * sy - 0.5,
+                size: k.size() * sx,
+                angle: k.angle(),
+                response: k.response(),
+            })
+        };
+        describe(&mut self.sift, &half, place, cap, self.rootsift)
+    }
+}
+
+/// Which of SIFT's scales a detection keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scales {
+    All,
+    /// Only the first octave's keypoints (found on the frame upsampled
+    /// twice): what a coarse pass at half size does not find.
+    Finest,
+}
+
+impl Scales {
+    fn admits(self, k: &KeyPoint) -> bool {
+        match self {
+            Scales::All => true,
+            // OpenCV packs the octave in the low byte, signed: -1 is 0xff.
+            Scales::Finest => (k.octave() & 0xff) as u8 as i8 == -1,
+        }
+    }
+}
+
+/// Run the detector on `input`, map each keypoint into the frame with
+/// `place` (`None` drops it), keep the `cap` strongest (0 = all) and return
+/// them with their descriptors (RootSIFT if asked).
+fn describe(
+    sift: &mut Ptr<SIFT>,
+    input: &Mat,
+    place: impl Fn(&KeyPoint) -> Option<Keypoint>,
+    cap: usize,
+    rootsift: bool,
+) -> Result<Features, FeatureError> {
+    let mut keypoints = Vector::<KeyPoint>::new();
+    let mut raw = Mat::default();
+    sift.detect_and_compute(input, &no_array(), &mut keypoints, &mut raw, false)?;
+    let rows = raw.rows().max(0) as usize;
+    if rows == 0 {
+        return Ok(Features::empty());
+    }
+    let cols = raw.cols() as usize;
+    let data: &[f32] = raw.data_typed()?;
+    let mut kept: Vec<(Keypoint, usize)> = keypoints
+        .iter()
+        .take(rows)
+        .enumerate()
+        .filter_map(|(i, k)| place(&k).map(|kp| (kp, i)))
+        .collect();
+    // Strongest first (stable, so equal responses keep OpenCV's order),
+    // then cap exactly: OpenCV's own cap keeps ties with the weakest.
+    kept.sort_by(|a, b| b.0.response.total_cmp(&a.0.response));
+    if cap > 0 {
+        kept.truncate(cap);
+    }
+    let mut descriptors = Array2::<f32>::zeros((kept.len(), cols));
+    for (mut row, (_, i)) in descriptors.rows_mut().into_iter().zip(&kept) {
+        row.assign(&ndarray::ArrayView1::from(&data[i * cols..(i + 1) * cols]));
+    }
+    if rootsift {
+        self::rootsift(&mut descriptors);
+    }
+    Ok(Features {
+        keypoints: kept.into_iter().map(|(k, _)| k).collect(),
+        descriptors,
+    })
 }
 
 /// Extract the features of a whole decoded image.
@@ -167,7 +233,7 @@ pub fn extract(image: &GrayImage, config: &ExtractConfig) -> Result<Features, Fe
     let mut frame = Frame::new(image, config)?;
     let (w, h) = frame.size();
     let all = (0, 0, w, h);
-    frame.detect(all, all, config.sift.max_features as usize)
+    frame.detect(all, all, config.sift.max_features as usize, Scales::All)
 }
 
 /// Decode a file and extract its features.

@@ -10,7 +10,7 @@ mod tiles;
 
 pub use config::{ExtractConfig, SiftParams};
 pub use decode::{DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe};
-pub use extract::{Descriptors, Features, Frame, extract, extract_file};
+pub use extract::{Descriptors, Features, Frame, Scales, extract, extract_file};
 pub use tiles::{TileGrid, Tiles};
 
 /// Why an image yielded no descriptors.

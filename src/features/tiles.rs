@@ -3,8 +3,14 @@
 //! it did not need. A tile is detected on its core rectangle grown by a margin
 //! (so a keypoint near a border sees its neighbourhood) and keeps only the
 //! keypoints whose centre lies in its core: every keypoint is found once.
+//!
+//! A grid may also be *coarse first*: before any tile, the whole frame is
+//! extracted at half size (about a quarter of the cost), which finds the
+//! keypoints of the coarser scales; the tiles that follow keep only the
+//! finest scale's keypoints (SIFT's first octave, the one found on the
+//! upsampled frame), so again every keypoint is found once.
 
-use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage};
+use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage, Scales};
 use serde::{Deserialize, Serialize};
 
 /// How a query is cut into tiles.
@@ -16,6 +22,10 @@ pub struct TileGrid {
     pub rows: u32,
     /// Pixels of context around each tile's core, in the extraction frame.
     pub margin: u32,
+    /// Extract the whole frame at half size before the tiles, which then keep
+    /// only their finest-scale keypoints.
+    #[serde(default)]
+    pub coarse: bool,
 }
 
 impl TileGrid {
@@ -24,14 +34,22 @@ impl TileGrid {
         cols: 1,
         rows: 1,
         margin: 0,
+        coarse: false,
     };
+
+    /// Share of an image's keypoints the coarse pass finds, before it has
+    /// run: what the feature-count estimate assumes until the tiles say more.
+    /// SIFT's first octave (on the frame upsampled twice) holds most of an
+    /// image's keypoints; `bowloc eval --tiles 2x2+24,coarse` prints the
+    /// measured share on a dataset.
+    pub const COARSE_SHARE: f64 = 0.3;
 
     /// Smallest tile side: a grid is coarsened so no core is narrower.
     pub const MIN_CORE: u32 = 64;
 
-    /// Tiles in the grid.
+    /// Extraction units: the tiles, plus the coarse pass.
     pub fn count(&self) -> usize {
-        (self.cols.max(1) * self.rows.max(1)) as usize
+        (self.cols.max(1) * self.rows.max(1)) as usize + usize::from(self.coarse)
     }
 
     /// Check the grid's numbers.
@@ -72,29 +90,51 @@ impl TileGrid {
 
 impl std::fmt::Display for TileGrid {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}x{}+{}", self.cols, self.rows, self.margin)
+        write!(f, "{}x{}+{}", self.cols, self.rows, self.margin)?;
+        if self.coarse {
+            write!(f, ",coarse")?;
+        }
+        Ok(())
     }
 }
 
 impl std::str::FromStr for TileGrid {
     type Err = String;
 
-    /// `COLSxROWS` or `COLSxROWS+MARGIN` (margin in pixels, default 24).
+    /// `COLSxROWS` or `COLSxROWS+MARGIN` (margin in pixels, default 24),
+    /// optionally followed by `,coarse`.
     fn from_str(s: &str) -> Result<Self, String> {
-        let bad = || format!("tile grid `{s}`: expected COLSxROWS[+MARGIN], e.g. 2x2+24");
-        let (grid, margin) = match s.split_once('+') {
+        let bad = || {
+            format!("tile grid `{s}`: expected COLSxROWS[+MARGIN][,coarse], e.g. 2x2+24")
+        };
+        let (spec, coarse) = match s.split_once(',') {
+            Some((g, "coarse")) => (g, true),
+            Some(_) => return Err(bad()),
+            None => (s, false),
+        };
+        let (grid, margin) = match spec.split_once('+') {
             Some((g, m)) => (g, m.trim().parse().map_err(|_| bad())?),
-            None => (s, 24),
+            None => (spec, 24),
         };
         let (c, r) = grid.split_once(['x', 'X', '×']).ok_or_else(bad)?;
         let t = Self {
             cols: c.trim().parse().map_err(|_| bad())?,
             rows: r.trim().parse().map_err(|_| bad())?,
             margin,
+            coarse,
         };
         t.validate()?;
         Ok(t)
     }
+}
+
+/// One piece of streaming extraction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Unit {
+    /// The whole frame at half size.
+    Coarse,
+    /// A tile of the grid, by number (row by row).
+    Tile(usize),
 }
 
 /// The tiles of one image, extracted one at a time in a given order.
@@ -102,17 +142,18 @@ pub struct Tiles {
     frame: Frame,
     cores: Vec<(u32, u32, u32, u32)>,
     margin: u32,
-    /// Tile numbers in extraction order.
-    order: Vec<usize>,
+    /// The units in extraction order: the coarse pass (if any) first.
+    order: Vec<Unit>,
     next: usize,
-    /// Keypoints the image may keep (0 = all), shared out over the tiles.
+    /// Keypoints the image may keep (0 = all), shared out over the units.
     cap: usize,
 }
 
 impl Tiles {
     /// Prepare `image` for tiled extraction. `order(n)` gives the order of the
-    /// n tiles (a permutation of 0..n); the grid may have been coarsened for a
-    /// small image, so n is known only here.
+    /// n units (a permutation of 0..n; with a coarse pass, unit 0 is the
+    /// coarse pass and must come first, unit i > 0 is tile i − 1); the grid
+    /// may have been coarsened for a small image, so n is known only here.
     pub fn new(
         image: &GrayImage,
         config: &ExtractConfig,
@@ -122,9 +163,18 @@ impl Tiles {
         let frame = Frame::new(image, config)?;
         let (w, h) = frame.size();
         let cores = grid.cores(w, h);
-        let n = cores.len();
-        let order: Vec<usize> = order(n).into_iter().map(|i| i as usize).collect();
+        let n = cores.len() + usize::from(grid.coarse);
+        let order: Vec<Unit> = order(n)
+            .into_iter()
+            .map(|u| match (grid.coarse, u as usize) {
+                (true, 0) => Unit::Coarse,
+                (true, u) => Unit::Tile(u - 1),
+                (false, u) => Unit::Tile(u),
+            })
+            .collect();
         debug_assert_eq!(order.len(), n);
+        debug_assert!(!grid.coarse || order[0] == Unit::Coarse);
+        let n = cores.len();
         let cap = config.sift.max_features as usize;
         Ok(Self {
             frame,
@@ -136,47 +186,64 @@ impl Tiles {
         })
     }
 
-    /// Tiles in all.
+    /// Units (tiles and the coarse pass) in all.
     pub fn total(&self) -> usize {
-        self.cores.len()
+        self.order.len()
     }
 
-    /// Tiles extracted so far.
+    /// Units extracted so far.
     pub fn extracted(&self) -> usize {
         self.next
     }
 
-    /// Share of the frame's area extracted so far.
+    /// The share of the image's keypoints extracted so far, as expected
+    /// before they are counted: a tile's share of the frame's area (of what
+    /// the coarse pass leaves, [`TileGrid::COARSE_SHARE`], after one).
     pub fn area_extracted(&self) -> f64 {
         let (w, h) = self.frame.size();
         let all = (w as f64 * h as f64).max(1.0);
+        let coarse = self.order.first() == Some(&Unit::Coarse);
+        let fine = if coarse {
+            1.0 - TileGrid::COARSE_SHARE
+        } else {
+            1.0
+        };
         self.order[..self.next]
             .iter()
-            .map(|&i| self.cores[i].2 as f64 * self.cores[i].3 as f64)
+            .map(|u| match *u {
+                Unit::Coarse => TileGrid::COARSE_SHARE,
+                Unit::Tile(i) => fine * self.cores[i].2 as f64 * self.cores[i].3 as f64 / all,
+            })
             .sum::<f64>()
-            / all
     }
 
-    /// Extract the next tile: its features in frame coordinates.
+    /// Extract the next unit: its features in frame coordinates.
     pub fn next_tile(&mut self) -> Option<Result<Features, FeatureError>> {
-        let &tile = self.order.get(self.next)?;
+        let &unit = self.order.get(self.next)?;
         self.next += 1;
-        let core = self.cores[tile];
-        let m = self.margin;
-        let region = (
-            core.0.saturating_sub(m),
-            core.1.saturating_sub(m),
-            core.2 + m + core.0.min(m),
-            core.3 + m + core.1.min(m),
-        );
-        Some(
-            self.frame
-                .detect(region, core, self.tile_cap(self.next - 1)),
-        )
+        let cap = self.tile_cap(self.next - 1);
+        Some(match unit {
+            Unit::Coarse => self.frame.detect_halved(cap),
+            Unit::Tile(tile) => {
+                let core = self.cores[tile];
+                let m = self.margin;
+                let region = (
+                    core.0.saturating_sub(m),
+                    core.1.saturating_sub(m),
+                    core.2 + m + core.0.min(m),
+                    core.3 + m + core.1.min(m),
+                );
+                let scales = match self.order[0] {
+                    Unit::Coarse => Scales::Finest,
+                    Unit::Tile(_) => Scales::All,
+                };
+                self.frame.detect(region, core, cap, scales)
+            }
+        })
     }
 
-    /// The cap of the k-th tile extracted: the image's cap split evenly, the
-    /// remainder to the first tiles, so the tiles' caps add up to the image's.
+    /// The cap of the k-th unit extracted: the image's cap split evenly, the
+    /// remainder to the first units, so the units' caps add up to the image's.
     fn tile_cap(&self, k: usize) -> usize {
         if self.cap == 0 {
             return 0;
@@ -215,11 +282,15 @@ mod tests {
             TileGrid {
                 cols: 2,
                 rows: 2,
-                margin: 24
+                margin: 24,
+                coarse: false,
             }
         );
         assert_eq!("1x1+0".parse::<TileGrid>().unwrap(), TileGrid::WHOLE);
-        for bad in ["", "2", "0x2", "2x17", "2x2+x", "2x2+999", "axb"] {
+        let coarse: TileGrid = "2x2+24,coarse".parse().unwrap();
+        assert!(coarse.coarse);
+        assert_eq!((coarse.count(), coarse.to_string()), (5, "2x2+24,coarse".into()));
+        for bad in ["", "2", "0x2", "2x17", "2x2+x", "2x2+999", "axb", "2x2,fine"] {
             assert!(bad.parse::<TileGrid>().is_err(), "{bad}");
         }
     }
