@@ -66,9 +66,7 @@ fn main() {
     }
     b.build("zipf", "synthetic", None).save(&path).unwrap();
     let (live, _) = LiveMap::open(&path, None, false, usize::MAX).unwrap();
-    println!(
-        "map: {images} images, {WORDS} words, {FEATURES} features per image; {added} adds"
-    );
+    println!("map: {images} images, {WORDS} words, {FEATURES} features per image; {added} adds");
 
     // 1. adds
     let mut times = Vec::with_capacity(added);
@@ -189,6 +187,9 @@ fn main() {
     println!(
         "compaction of {images_now} images (fold, atomic write, reopen): median {:.0} ms of {:?} ms",
         ms(median(&mut compactions.clone())),
-        compactions.iter().map(|d| ms(*d).round()).collect::<Vec<_>>()
+        compactions
+            .iter()
+            .map(|d| ms(*d).round())
+            .collect::<Vec<_>>()
     );
 }

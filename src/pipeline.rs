@@ -4,11 +4,10 @@
 
 use crate::dataset::ImageRef;
 use crate::features::fit::OpenCvFit;
-use cpu_time::ThreadTime;
 use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
 use crate::geometry::Keypoint;
-use crate::geometry::verify::{LeaderVerifier, VerifyParams, rerank, with_keypoints};
 use crate::geometry::packed::PackedFeature;
+use crate::geometry::verify::{LeaderVerifier, VerifyParams, rerank, with_keypoints};
 use crate::index::{ImageWords, MapBuilder, MapIndex, MapRead, Places};
 use crate::live::{LiveMap, Opened};
 use crate::quantize::{Quantizer, QuantizerKind};
@@ -17,6 +16,7 @@ use crate::search::{self, Search, SearchOptions};
 use crate::vocabulary::kmeans::{KmeansConfig, kmeans};
 use crate::vocabulary::{Vocabulary, VocabularyMeta};
 use anyhow::{Context, bail};
+use cpu_time::ThreadTime;
 use indicatif::{ProgressBar, ProgressStyle};
 use ndarray::{Array2, ArrayView2, Axis};
 use rayon::prelude::*;

@@ -128,8 +128,24 @@ fn every_acknowledged_change_survives_sigkill_and_nothing_else_appears() {
     .unwrap();
     let (vocab, map) = (dir.path().join("v.bowvoc"), dir.path().join("m.bowmap"));
     for args in [
-        vec!["vocab", "build", "--images", list.to_str().unwrap(), "--words", "64", "--out"],
-        vec!["map", "build", "--vocab", vocab.to_str().unwrap(), "--images", list.to_str().unwrap(), "--out"],
+        vec![
+            "vocab",
+            "build",
+            "--images",
+            list.to_str().unwrap(),
+            "--words",
+            "64",
+            "--out",
+        ],
+        vec![
+            "map",
+            "build",
+            "--vocab",
+            vocab.to_str().unwrap(),
+            "--images",
+            list.to_str().unwrap(),
+            "--out",
+        ],
     ] {
         let out = if args[0] == "vocab" { &vocab } else { &map };
         let s = Command::new(BIN)
@@ -194,8 +210,7 @@ fn every_acknowledged_change_survives_sigkill_and_nothing_else_appears() {
                         let after = (method == "PUT").then_some(u64::MAX);
                         model.lock().unwrap().pending = Some((id.clone(), after));
                     }
-                    let Ok((status, answer)) = request(addr, method, &path, body.as_deref())
-                    else {
+                    let Ok((status, answer)) = request(addr, method, &path, body.as_deref()) else {
                         return compacted; // killed
                     };
                     let mut m = model.lock().unwrap();
@@ -243,7 +258,10 @@ fn every_acknowledged_change_survives_sigkill_and_nothing_else_appears() {
                 (false, _) => {}
             }
         }
-        assert_eq!(got, want, "round {round}: the map differs from the acknowledged changes");
+        assert_eq!(
+            got, want,
+            "round {round}: the map differs from the acknowledged changes"
+        );
         m.images = got;
         child = Some((next, addr));
     }

@@ -2,17 +2,17 @@
 //! `bowloc map add|remove|list|compact`: change a map file's images through
 //! its change log, as the service's `/images` endpoints do.
 
+use anyhow::Context;
 use bowloc::dataset::image_list;
 use bowloc::geometry::packed::PACKED_BYTES;
-use anyhow::Context;
 use bowloc::index::{MapRead, Places};
 use bowloc::live::{Applied, Change, LiveMap, NewImage, now_ms};
 use bowloc::pipeline::Localizer;
-use bowloc::server::images::{ImageItem, check_id};
-use std::io::Write;
 use bowloc::pipeline::build_map;
+use bowloc::server::images::{ImageItem, check_id};
 use bowloc::vocabulary::Vocabulary;
 use clap::{Args, Subcommand};
+use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Subcommand)]
@@ -83,7 +83,10 @@ fn pose_values(given: &[String], fields: &[String]) -> anyhow::Result<Vec<f64>> 
             .split_once('=')
             .ok_or_else(|| anyhow::anyhow!("--pose {g}: expected FIELD=VALUE"))?;
         let i = fields.iter().position(|f| f == k).ok_or_else(|| {
-            anyhow::anyhow!("--pose {g}: the map's pose fields are [{}]", fields.join(", "))
+            anyhow::anyhow!(
+                "--pose {g}: the map's pose fields are [{}]",
+                fields.join(", ")
+            )
         })?;
         pose[i] = v
             .parse::<f64>()

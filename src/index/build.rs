@@ -195,7 +195,12 @@ pub fn weigh(image: &ImageWords, idf: &[f32]) -> (Vec<(u32, f32)>, f32) {
     let mut entries: Vec<(u32, f32)> = image
         .counts
         .iter()
-        .map(|&(w, c)| (w, c as f32 / n * idf.get(w as usize).copied().unwrap_or(0.0)))
+        .map(|&(w, c)| {
+            (
+                w,
+                c as f32 / n * idf.get(w as usize).copied().unwrap_or(0.0),
+            )
+        })
         .filter(|&(_, v)| v > 0.0)
         .collect();
     let norm = entries.iter().map(|&(_, v)| v * v).sum::<f32>().sqrt();

@@ -331,7 +331,10 @@ impl LogWriter {
             .and_then(|_| self.file.write_all(bytes))
             .and_then(|_| self.file.sync_data());
         if let Err(e) = written {
-            let _ = self.file.set_len(self.len).and_then(|_| self.file.sync_data());
+            let _ = self
+                .file
+                .set_len(self.len)
+                .and_then(|_| self.file.sync_data());
             return Err(io(&path)(e));
         }
         self.len += bytes.len() as u64;

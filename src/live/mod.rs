@@ -178,7 +178,11 @@ impl LiveMap {
                         tracing::warn!(log = %log_path.display(), "change log tail cut off: {why}");
                         opened.dropped = Some(why.clone());
                     }
-                    for record in parsed.records.iter().filter(|r| r.generation > file_generation) {
+                    for record in parsed
+                        .records
+                        .iter()
+                        .filter(|r| r.generation > file_generation)
+                    {
                         if let Err(e) = snapshot.apply(record, usize::MAX) {
                             tracing::warn!(
                                 generation = record.generation,

@@ -300,10 +300,7 @@ impl<'a> Voter<'a> {
     pub fn image_vote_cap(&self, j: u32) -> f32 {
         match self.image_max.get(j as usize) {
             Some(&m) => m,
-            None => self
-                .overlay
-                .and_then(|o| o.image_max(j))
-                .unwrap_or(0.0),
+            None => self.overlay.and_then(|o| o.image_max(j)).unwrap_or(0.0),
         }
     }
 }

@@ -350,7 +350,10 @@ pub async fn put_image(
     let deadline = Instant::now() + state.config.deadline();
     let localizer = state.localizer()?;
     check_id(&id)?;
-    let (place, pose) = put_fields(query.as_deref(), &localizer.map.snapshot().meta().pose_fields)?;
+    let (place, pose) = put_fields(
+        query.as_deref(),
+        &localizer.map.snapshot().meta().pose_fields,
+    )?;
     let _claim = state.writing.claim(&id)?;
     let image = tokio::time::timeout_at(deadline.into(), read_image(&state, request))
         .await
@@ -380,9 +383,8 @@ pub async fn put_image(
     } else {
         StatusCode::CREATED
     };
-    let warning = (n == 0).then(|| {
-        "the image has no features: it was added but no query can find it".to_owned()
-    });
+    let warning = (n == 0)
+        .then(|| "the image has no features: it was added but no query can find it".to_owned());
     let body = Written {
         id,
         generation,

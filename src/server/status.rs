@@ -3,10 +3,10 @@
 //! document (`/openapi.json`).
 
 use super::AppState;
-use crate::index::MapRead;
 use super::errors::{ApiError, ErrorBody};
 use crate::features::ExtractConfig;
 use crate::index::MapMeta;
+use crate::index::MapRead;
 use crate::report::MapIdentity;
 use crate::vocabulary::VocabularyMeta;
 use axum::Json;
