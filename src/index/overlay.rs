@@ -208,7 +208,7 @@ mod tests {
         // the clone taken before is unchanged
         assert_eq!(before.list(1).flatten().count(), 0);
         assert_eq!(before.ids(), 3);
-        assert_eq!((o.ids(), o.added(), o.entries()), (5, 2, 3));
+        assert_eq!((o.ids(), o.added(), o.entries()), (6, 3, 4));
         assert_eq!(o.image_max(4), Some(0.9));
         assert_eq!(o.image_max(2), None);
         assert_eq!(o.vote_cap(), 0.9);
