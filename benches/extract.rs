@@ -2,9 +2,17 @@
 //! (960×540): the maximum image side, and OpenCV's own threads (one request
 //! on two threads) versus request-level parallelism (two requests at once on
 //! one thread each). Prints medians and feature counts, then benchmarks.
+//!
+//! Then the streaming extraction plans ([`TileGrid`]) against the whole
+//! image: each image goes through every plan in turn (three rounds, the
+//! cheapest kept), so the ratios compare plans under the same load; costs are
+//! the extracting thread's CPU time. For each plan: the full extraction's
+//! cost and keypoints against the whole image's, and what the first unit
+//! (the coarse pass, or one tile) costs and finds.
 
 use bowloc::dataset::Dataset;
-use bowloc::features::{self, DecodeLimits, ExtractConfig};
+use bowloc::features::{self, DecodeLimits, ExtractConfig, TileGrid};
+use bowloc::pipeline::extract_tiled;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -53,6 +61,57 @@ fn summary(images: &[Vec<u8>]) {
         );
     }
     thread_layouts(images, &config(640));
+    tile_plans(images, &config(640));
+}
+
+/// Streaming extraction plans against the whole image, image by image.
+fn tile_plans(images: &[Vec<u8>], c: &ExtractConfig) {
+    features::set_opencv_threads(1);
+    let plans: Vec<TileGrid> = [
+        "1x1+0",
+        "2x2+24",
+        "1x1+0,coarse",
+        "2x2+24,coarse",
+        "3x3+16,coarse",
+        "4x4+16,coarse",
+    ]
+    .iter()
+    .map(|p| p.parse().unwrap())
+    .collect();
+    // per plan, per image: (full cost, keypoints, first unit's cost, its keypoints), in ms
+    let mut measured = vec![Vec::new(); plans.len()];
+    for image in images {
+        let decoded = features::decode(image, DecodeLimits::default()).unwrap();
+        let mut best = vec![(f64::INFINITY, 0usize, 0.0, 0usize); plans.len()];
+        for _round in 0..3 {
+            for (p, plan) in plans.iter().enumerate() {
+                let (f, units) = extract_tiled(&decoded, c, *plan).unwrap();
+                let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+                let total: f64 = units.iter().map(|u| ms(u.extract)).sum();
+                if total < best[p].0 {
+                    best[p] = (total, f.len(), ms(units[0].extract), units[0].features);
+                }
+            }
+        }
+        for (p, b) in best.into_iter().enumerate() {
+            measured[p].push(b);
+        }
+    }
+    let whole = &measured[0];
+    for (plan, m) in plans.iter().zip(&measured) {
+        let ratio = |f: &dyn Fn(usize) -> f64| median((0..m.len()).map(f).collect());
+        eprintln!(
+            "plan {plan:<14}: full extraction {:.2}× the whole image's CPU time ({:.1} ms), \
+             keypoints {:.3}×; first unit {:.2}× of the whole image's time for {:.2} of the plan's keypoints \
+             (medians over {} images)",
+            ratio(&|i| m[i].0 / whole[i].0),
+            median(m.iter().map(|x| x.0).collect()),
+            ratio(&|i| m[i].1 as f64 / whole[i].1.max(1) as f64),
+            ratio(&|i| m[i].2 / whole[i].0),
+            ratio(&|i| m[i].3 as f64 / m[i].1.max(1) as f64),
+            m.len()
+        );
+    }
 }
 
 /// Extraction of `images` by `requests` concurrent callers, each over every

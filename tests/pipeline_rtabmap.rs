@@ -301,3 +301,43 @@ fn cli_reports_bad_input_clearly() {
     assert_eq!(used, total.div_ceil(2));
     assert_eq!(json[0]["seed"], 4);
 }
+
+/// Every streaming plan finds (almost) the keypoints of the whole image: the
+/// tiles' margins and the coarse pass's octave split lose or duplicate at
+/// most a few percent, and a coarse pass comes first and finds a good share.
+#[test]
+fn streaming_plans_find_the_whole_images_keypoints() {
+    use bowloc::features::{GrayImage, TileGrid, decode_file};
+    use bowloc::pipeline::extract_tiled;
+    let data = Dataset::open(&common::dataset("rtabmap-loop")).unwrap();
+    let config = ExtractConfig::default();
+    for query in data.queries.iter().step_by(11) {
+        let image: GrayImage = decode_file(&query.path, DecodeLimits::default()).unwrap();
+        let (whole, _) = extract_tiled(&image, &config, TileGrid::WHOLE).unwrap();
+        assert!(
+            whole.len() > 100,
+            "{}: {} keypoints",
+            query.name,
+            whole.len()
+        );
+        for plan in ["2x2+24", "1x1+0,coarse", "2x2+24,coarse"] {
+            let grid: TileGrid = plan.parse().unwrap();
+            let (f, units) = extract_tiled(&image, &config, grid).unwrap();
+            let ratio = f.len() as f64 / whole.len() as f64;
+            assert!(
+                (0.95..=1.05).contains(&ratio),
+                "{plan} on {}: {ratio:.3}",
+                query.name
+            );
+            assert_eq!(units.len(), grid.count(), "{plan}");
+            assert_eq!(f.keypoints.len(), f.descriptors.nrows());
+            if grid.coarse {
+                let share = units[0].features as f64 / f.len() as f64;
+                assert!(
+                    (0.15..0.85).contains(&share),
+                    "{plan}: coarse share {share:.3}"
+                );
+            }
+        }
+    }
+}

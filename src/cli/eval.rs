@@ -54,8 +54,9 @@ pub struct EvalArgs {
     /// Skip the PNG/SVG figures.
     #[arg(long)]
     no_plots: bool,
-    /// The queries' tile grid for streaming extraction, COLSxROWS[+MARGIN]
-    /// (1x1: whole images). The full search also runs on whole queries.
+    /// The queries' tile grid for streaming extraction,
+    /// COLSxROWS[+MARGIN][,coarse] (1x1: whole images; `,coarse`: a half-size
+    /// pass first). The full search also runs on whole queries.
     #[arg(long, default_value = "2x2+24")]
     tiles: TileGrid,
     #[command(flatten)]

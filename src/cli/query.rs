@@ -19,8 +19,8 @@ pub struct QueryArgs {
     images: Vec<PathBuf>,
     #[command(flatten)]
     search: SearchArgs,
-    /// Streaming extraction's tile grid, COLSxROWS[+MARGIN] (1x1: the whole
-    /// image at once).
+    /// Streaming extraction's tile grid, COLSxROWS[+MARGIN][,coarse] (1x1: the
+    /// whole image at once; `,coarse`: a half-size pass first).
     #[arg(long, default_value = "2x2+24")]
     tiles: TileGrid,
     #[command(flatten)]

@@ -427,10 +427,17 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         })
         .transpose()?;
     if config.tiles.coarse {
-        let (coarse, all) = query_desc.meta().tiles.iter().fold((0u64, 0u64), |(c, a), t| {
-            let first = t.first().map_or(0, |t| t.features as u64);
-            (c + first, a + t.iter().map(|t| t.features as u64).sum::<u64>())
-        });
+        let (coarse, all) = query_desc
+            .meta()
+            .tiles
+            .iter()
+            .fold((0u64, 0u64), |(c, a), t| {
+                let first = t.first().map_or(0, |t| t.features as u64);
+                (
+                    c + first,
+                    a + t.iter().map(|t| t.features as u64).sum::<u64>(),
+                )
+            });
         tracing::info!(
             "coarse pass: {:.3} of the queries' keypoints (the search assumes {} before counting)",
             coarse as f64 / all.max(1) as f64,

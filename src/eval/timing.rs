@@ -9,9 +9,9 @@
 //! share of a request).
 
 use crate::quantize::Quantizer;
+use cpu_time::ThreadTime;
 use ndarray::{ArrayView2, Axis};
 use serde::Serialize;
-use cpu_time::ThreadTime;
 
 /// A query's words and what quantizing one of its features cost.
 #[derive(Debug, Clone)]

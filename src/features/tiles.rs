@@ -104,9 +104,7 @@ impl std::str::FromStr for TileGrid {
     /// `COLSxROWS` or `COLSxROWS+MARGIN` (margin in pixels, default 24),
     /// optionally followed by `,coarse`.
     fn from_str(s: &str) -> Result<Self, String> {
-        let bad = || {
-            format!("tile grid `{s}`: expected COLSxROWS[+MARGIN][,coarse], e.g. 2x2+24")
-        };
+        let bad = || format!("tile grid `{s}`: expected COLSxROWS[+MARGIN][,coarse], e.g. 2x2+24");
         let (spec, coarse) = match s.split_once(',') {
             Some((g, "coarse")) => (g, true),
             Some(_) => return Err(bad()),
@@ -289,8 +287,13 @@ mod tests {
         assert_eq!("1x1+0".parse::<TileGrid>().unwrap(), TileGrid::WHOLE);
         let coarse: TileGrid = "2x2+24,coarse".parse().unwrap();
         assert!(coarse.coarse);
-        assert_eq!((coarse.count(), coarse.to_string()), (5, "2x2+24,coarse".into()));
-        for bad in ["", "2", "0x2", "2x17", "2x2+x", "2x2+999", "axb", "2x2,fine"] {
+        assert_eq!(
+            (coarse.count(), coarse.to_string()),
+            (5, "2x2+24,coarse".into())
+        );
+        for bad in [
+            "", "2", "0x2", "2x17", "2x2+x", "2x2+999", "axb", "2x2,fine",
+        ] {
             assert!(bad.parse::<TileGrid>().is_err(), "{bad}");
         }
     }

@@ -22,7 +22,11 @@ const TILE_ORDER_SALT: u64 = 0x7469_6c65_6f72_6465;
 pub fn tile_order(n: usize, coarse_first: bool, seed: u64) -> Vec<u32> {
     match coarse_first {
         true if n > 0 => std::iter::once(0)
-            .chain(permutation(n - 1, seed ^ TILE_ORDER_SALT).into_iter().map(|t| t + 1))
+            .chain(
+                permutation(n - 1, seed ^ TILE_ORDER_SALT)
+                    .into_iter()
+                    .map(|t| t + 1),
+            )
             .collect(),
         _ => permutation(n, seed ^ TILE_ORDER_SALT),
     }

@@ -134,7 +134,8 @@ pub struct SearchDefaults {
     /// Groups the tree quantizer searches per descriptor.
     pub tree_probes: usize,
     /// Streaming extraction: `COLSxROWS+MARGIN` tiles extracted one by one
-    /// until the rule stops the search; `1x1` extracts the whole image first.
+    /// until the rule stops the search; `1x1` extracts the whole image first;
+    /// a `,coarse` suffix extracts the whole image at half size first.
     pub tiles: String,
 }
 

@@ -61,7 +61,9 @@ pub struct LocalizeParams {
     #[param(value_type = Option<u32>, minimum = 0)]
     pub min_features: Option<String>,
     /// Streaming extraction's tile grid, `COLSxROWS` or `COLSxROWS+MARGIN`
-    /// (`1x1`: extract the whole image first). Default: the configured grid.
+    /// (`1x1`: extract the whole image first), optionally followed by
+    /// `,coarse` (a half-size pass over the whole image before the tiles).
+    /// Default: the configured grid.
     #[param(value_type = Option<String>, example = "2x2+24")]
     pub tiles: Option<String>,
     /// Verify the top vote candidates geometrically and re-rank them by
