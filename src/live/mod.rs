@@ -63,7 +63,7 @@ pub struct Compaction {
 
 /// The state of the changes, as `/map` reports it.
 #[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
-pub struct Status {
+pub struct ChangesInfo {
     /// Changes applied since the first map file (each add or removal: +1).
     pub generation: u64,
     /// Generation of the map file (changes folded into it).
@@ -314,7 +314,7 @@ impl LiveMap {
     }
 
     /// Generation, counts, log size and the last compaction.
-    pub fn status(&self) -> Status {
+    pub fn status(&self) -> ChangesInfo {
         let s = self.snapshot();
         let o = s.overlay();
         let (log_records, log_bytes) = match &self.writer {
@@ -324,7 +324,7 @@ impl LiveMap {
                 (Some(w.log.records()), Some(w.log.len()))
             }
         };
-        Status {
+        ChangesInfo {
             generation: s.generation(),
             file_generation: s.base().meta().generation,
             file_images: s.base().images(),

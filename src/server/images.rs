@@ -495,7 +495,8 @@ pub async fn list_images(
     let params: ListParams = serde_urlencoded::from_str(query.as_deref().unwrap_or(""))
         .map_err(|e| ApiError::bad_request("invalid_parameter", e.to_string()))?;
     let offset = match &params.offset {
-        Some(v) => whole("offset", v, 0..=u32::MAX as usize)?,
+        // the API document's int32
+        Some(v) => whole("offset", v, 0..=i32::MAX as usize)?,
         None => 0,
     };
     let limit = match &params.limit {

@@ -41,7 +41,8 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
     components(schemas(
         Localization, Candidate, FeatureUse, RuleReport, StopInfo, ImageSize, Timings,
         MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload, Binary,
-        ImageItem, ImagePage, Written, Compacted, crate::live::Compaction, crate::live::Status,
+        ImageItem, ImagePage, Written, Compacted, crate::live::Compaction,
+        crate::live::ChangesInfo,
     )),
     modifiers(&BearerAuth),
     tags(

@@ -66,7 +66,7 @@ pub struct MapInfo {
     pub query_extract: ExtractConfig,
     /// The changes since the map file was written: generation, images of
     /// the file and now, added and removed, change log size, last compaction.
-    pub changes: crate::live::Status,
+    pub changes: crate::live::ChangesInfo,
 }
 
 /// The loaded map and vocabulary.
