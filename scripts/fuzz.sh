@@ -1,8 +1,12 @@
 #!/usr/bin/env bash
-# Fuzz the loading of vocabulary and map files with cargo-fuzz (libFuzzer,
-# AddressSanitizer). Usage: scripts/fuzz.sh [SECONDS]   (default 60; CI uses a
-# short budget, run longer by hand, e.g. scripts/fuzz.sh 3600).
-# The seed corpus is a small real vocabulary and map built from rtabmap-loop.
+# Fuzz the loading of vocabulary and map files, and the reading of a map's
+# change log, with cargo-fuzz (libFuzzer, AddressSanitizer). Usage:
+# scripts/fuzz.sh [SECONDS]   (default 60, split between the two targets: two
+# thirds to the files, one third to the log; CI uses a short budget, run
+# longer by hand, e.g. scripts/fuzz.sh 3600).
+# The seed corpus of the files is a small real vocabulary and map built from
+# rtabmap-loop; that of the log, a log of one add and one removal written by
+# `bowloc map add|remove` on that map.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 secs=${1:-60}
@@ -18,5 +22,21 @@ if [ ! -f "$corpus/seed.bowmap" ]; then
   ./target/release/bowloc --log warn vocab build --images "$tmp/few.txt" --words 8 --out "$corpus/seed.bowvoc"
   ./target/release/bowloc --log warn map build --vocab "$corpus/seed.bowvoc" --images "$tmp/few.txt" --out "$corpus/seed.bowmap"
 fi
+log_corpus=fuzz/corpus/change_log
+mkdir -p "$log_corpus"
+if [ ! -f "$log_corpus/seed.changes" ]; then
+  cargo build --release
+  tmp=$(mktemp -d)
+  d=../shared/datasets/rtabmap-loop
+  cp "$corpus/seed.bowmap" "$tmp/m.bowmap"
+  ./target/release/bowloc --log warn map add --vocab "$corpus/seed.bowvoc" --map "$tmp/m.bowmap" \
+    --id added "$d/images/4.jpg" >/dev/null
+  ./target/release/bowloc --log warn map remove --map "$tmp/m.bowmap" --id added >/dev/null
+  cp "$tmp/m.bowmap.changes" "$log_corpus/seed.changes"
+  rm -rf "$tmp"
+fi
 # cargo-fuzz needs nightly flags; the stable toolchain accepts them with RUSTC_BOOTSTRAP.
-RUSTC_BOOTSTRAP=1 cargo fuzz run load_files "$corpus" -- -max_total_time="$secs" -rss_limit_mb=4096
+files_secs=$(( secs * 2 / 3 ))
+log_secs=$(( secs - files_secs ))
+RUSTC_BOOTSTRAP=1 cargo fuzz run load_files "$corpus" -- -max_total_time="$files_secs" -rss_limit_mb=4096
+RUSTC_BOOTSTRAP=1 cargo fuzz run change_log "$log_corpus" -- -max_total_time="$log_secs" -rss_limit_mb=4096

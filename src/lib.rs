@@ -14,6 +14,8 @@
 //! - [`vocabulary`] — the visual words (k-means centroids) and their training.
 //! - [`geometry`] — keypoints as plain numbers (position, size, angle).
 //! - [`index`] — the map: a tf-idf inverted index over the map's images.
+//! - [`live`] — live maps: images added and removed while serving, a
+//!   durable change log beside the map file, compaction into a new file.
 //! - [`store`] — the memory-mapped, checksummed file format both are kept in.
 //! - [`dataset`] — the shared dataset layout (image lists, ground truth).
 //! - [`pipeline`] — glue used by every front end: extraction over image lists,
@@ -39,6 +41,7 @@ pub mod eval;
 pub mod features;
 pub mod geometry;
 pub mod index;
+pub mod live;
 pub mod pipeline;
 pub mod quantize;
 pub mod report;

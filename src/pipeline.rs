@@ -6,10 +6,12 @@ use crate::dataset::ImageRef;
 use crate::features::fit::OpenCvFit;
 use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
 use crate::geometry::Keypoint;
+use crate::geometry::packed::PackedFeature;
 use crate::geometry::verify::{
     LeaderVerifier, VerifyParams, inlier_matches, rerank, with_keypoints,
 };
-use crate::index::{ImageWords, MapBuilder, MapIndex, Places};
+use crate::index::{ImageWords, MapBuilder, MapIndex, MapRead, Places};
+use crate::live::{LiveMap, Opened};
 use crate::quantize::{Quantizer, QuantizerKind};
 use crate::report::{CandidateMatches, EdgeTimings, Extraction, ImageSize, Localization};
 use crate::search::{self, Search, SearchOptions};
@@ -290,13 +292,7 @@ pub fn index_descriptors(
         .par_iter()
         .zip(features)
         .map(|(name, f)| {
-            let image = match f {
-                Some(f) => {
-                    let words = quantize_all(quantizer, f.descriptors.view());
-                    ImageWords::with_geometry(name.clone(), &words, &f.keypoints)
-                }
-                None => ImageWords::from_words(name.clone(), &[]),
-            };
+            let image = map_image_words(quantizer, name, f.as_ref());
             bar.inc(1);
             image
         })
@@ -307,6 +303,18 @@ pub fn index_descriptors(
         builder.add(image);
     }
     builder.build(map_name, &vocab.hash_hex(), places)
+}
+
+/// One map image as the map keeps it: each feature's word (exact
+/// quantization) and keypoint; no features when it could not be read.
+pub fn map_image_words(quantizer: &dyn Quantizer, name: &str, f: Option<&Features>) -> ImageWords {
+    match f {
+        Some(f) => {
+            let words = quantize_all(quantizer, f.descriptors.view());
+            ImageWords::with_geometry(name, &words, &f.keypoints)
+        }
+        None => ImageWords::from_words(name, &[]),
+    }
 }
 
 /// Extract descriptors from `images` and index them.
@@ -340,10 +348,12 @@ pub fn build_map(
     ))
 }
 
-/// A loaded vocabulary and map, ready to answer queries.
+/// A loaded vocabulary and map, ready to answer queries. The map may take
+/// changes ([`LiveMap`]); each query searches the snapshot current when it
+/// starts.
 pub struct Localizer {
     pub vocab: Vocabulary,
-    pub map: MapIndex,
+    pub map: LiveMap,
     pub limits: DecodeLimits,
     pub quantizer: QuantizerKind,
     /// How queries are extracted: the vocabulary's settings, which a front end
@@ -362,12 +372,29 @@ impl Localizer {
     /// Open both files and check that the map was built with the vocabulary.
     pub fn open(vocab: &Path, map: &Path, verify: bool) -> anyhow::Result<Self> {
         let vocab_file = Vocabulary::open(vocab, verify)?;
-        let map = MapIndex::open_for(map, &vocab_file, verify)?;
+        let map = LiveMap::fixed(MapIndex::open_for(map, &vocab_file, verify)?);
+        Ok(Self::with_map(vocab_file, map))
+    }
+
+    /// Open both files and the map's change log (replayed; created when
+    /// missing), so the map takes changes; at most `max_images` images.
+    pub fn open_live(
+        vocab: &Path,
+        map: &Path,
+        verify: bool,
+        max_images: usize,
+    ) -> anyhow::Result<(Self, Opened)> {
+        let vocab_file = Vocabulary::open(vocab, verify)?;
+        let (map, opened) = LiveMap::open(map, Some(&vocab_file), verify, max_images)?;
+        Ok((Self::with_map(vocab_file, map), opened))
+    }
+
+    fn with_map(vocab_file: Vocabulary, map: LiveMap) -> Self {
         let no_verify = VerifyParams {
             enabled: false,
             ..VerifyParams::default()
         };
-        Ok(Self {
+        Self {
             extract: vocab_file.meta().extract.clone(),
             vocab: vocab_file,
             map,
@@ -376,7 +403,16 @@ impl Localizer {
             tiles: TileGrid::WHOLE,
             fit: OpenCvFit::new(no_verify.fit()),
             verify: no_verify,
-        })
+        }
+    }
+
+    /// The features an image given as encoded bytes adds to the map: the
+    /// whole image extracted with the vocabulary's settings and exactly
+    /// quantized, as `bowloc map build` indexes it.
+    pub fn map_features(&self, bytes: &[u8]) -> Result<Vec<PackedFeature>, FeatureError> {
+        let image = features::decode(bytes, self.limits)?;
+        let (f, _) = extract_tiled(&image, &self.vocab.meta().extract, TileGrid::WHOLE)?;
+        Ok(map_image_words(self.vocab.exact_quantizer(), "", Some(&f)).geometry)
     }
 
     /// Verification settings; `params.enabled` is the default of
@@ -407,15 +443,16 @@ impl Localizer {
     /// by inliers and keep `options.top_n` scoring at least `options.min_score`.
     pub fn verify(
         &self,
+        map: &dyn MapRead,
         answer: Localization,
         query: &[(u32, Keypoint)],
         options: &SearchOptions,
     ) -> Localization {
         let started = Instant::now();
         let votes: Vec<(u32, f32)> = answer.candidates.iter().map(|c| (c.id, c.score)).collect();
-        let reranked = rerank(&self.map, &votes, query, &self.fit, &self.verify);
+        let reranked = rerank(map, &votes, query, &self.fit, &self.verify);
         let mut answer = answer.verified(
-            &self.map,
+            map,
             &reranked,
             options.top_n,
             options.min_score,
@@ -429,7 +466,7 @@ impl Localizer {
                 .iter()
                 .filter(|c| c.inliers.unwrap_or(0) > 0)
                 .map(|c| {
-                    let inliers = inlier_matches(&self.map, c.id, query, &self.fit, &self.verify);
+                    let inliers = inlier_matches(map, c.id, query, &self.fit, &self.verify);
                     CandidateMatches::new(c.id, &inliers.query, &inliers.map)
                 })
                 .collect();
@@ -492,7 +529,9 @@ impl Localizer {
         })?;
         let mut extract = decoded.elapsed();
         let quantizer = self.vocab.quantizer(self.quantizer);
-        let mut search = Search::new(&self.map, &searched);
+        let snapshot = self.map.snapshot();
+        let map: &dyn MapRead = &*snapshot;
+        let mut search = Search::new(map, &searched);
         let mut full = None;
         if tracing != Tracing::Off {
             search = search.trace(1, TRACE_POINTS);
@@ -503,7 +542,7 @@ impl Localizer {
                 min_features: 0,
                 ..searched.clone()
             };
-            full = Some(Search::new(&self.map, &everything).trace(1, TRACE_POINTS));
+            full = Some(Search::new(map, &everything).trace(1, TRACE_POINTS));
         }
         let mut keypoints: Vec<Keypoint> = Vec::new();
         let mut tiles_used = 0;
@@ -533,7 +572,7 @@ impl Localizer {
             let quantize =
                 search::descriptor_quantizer(&*quantizer, tile.descriptors.view(), options.block);
             let mut check = LeaderVerifier {
-                map: &self.map,
+                map,
                 fit: &self.fit,
                 params: &self.verify,
                 keypoints: &keypoints,
@@ -560,7 +599,7 @@ impl Localizer {
         let query = with_keypoints(search.voted(), &keypoints);
         let outcome = search.finish();
         let mut answer = Localization::new(
-            &self.map,
+            map,
             &options.rule,
             options.seed,
             size,
@@ -569,13 +608,13 @@ impl Localizer {
             extraction,
         );
         if let Some(full) = full {
-            answer.compare_with_full(&self.map, full.finish(), options.top_n);
+            answer.compare_with_full(map, full.finish(), options.top_n);
         }
         if let Some(trace) = &mut answer.trace {
             trace.frame_side = self.extract.max_side;
         }
         Ok(if verify {
-            self.verify(answer, &query, options)
+            self.verify(map, answer, &query, options)
         } else {
             answer
         })

@@ -6,7 +6,7 @@
 //! document.
 
 use crate::features::TileGrid;
-use crate::index::{ImageInfo, MapIndex};
+use crate::index::{ImageInfo, MapRead};
 use crate::search::{RuleSpec, SearchOutcome, StopInfo, Trace};
 use serde::Serialize;
 use std::collections::HashMap;
@@ -217,7 +217,7 @@ pub struct FilteredCandidate {
 impl SequenceAnswer {
     /// The answer for a frame whose search gave `posterior`.
     pub fn new(
-        map: &MapIndex,
+        map: &dyn MapRead,
         name: &str,
         prediction: &crate::sequence::Prediction,
         frames: u64,
@@ -386,7 +386,7 @@ pub struct MapIdentity {
 }
 
 impl MapIdentity {
-    pub fn of(map: &MapIndex) -> Self {
+    pub fn of(map: &dyn MapRead) -> Self {
         let m = map.meta();
         Self {
             name: m.name.clone(),
@@ -399,7 +399,7 @@ impl MapIdentity {
 
 impl Candidate {
     /// The ranked vote candidates of a search, with their map metadata.
-    fn ranked(map: &MapIndex, outcome: &SearchOutcome) -> Vec<Self> {
+    fn ranked(map: &dyn MapRead, outcome: &SearchOutcome) -> Vec<Self> {
         outcome
             .candidates
             .iter()
@@ -456,7 +456,7 @@ pub struct EdgeTimings {
 
 impl Localization {
     pub fn new(
-        map: &MapIndex,
+        map: &dyn MapRead,
         rule: &RuleSpec,
         seed: u64,
         image: ImageSize,
@@ -507,7 +507,7 @@ impl Localization {
 
     /// Add the full search over every feature (traced) to the trace, for
     /// comparison.
-    pub fn compare_with_full(&mut self, map: &MapIndex, full: SearchOutcome, top_n: usize) {
+    pub fn compare_with_full(&mut self, map: &dyn MapRead, full: SearchOutcome, top_n: usize) {
         let Some(trace) = &mut self.trace else { return };
         let Some(t) = &full.trace else { return };
         let mut candidates = Candidate::ranked(map, &full);
@@ -526,7 +526,7 @@ impl Localization {
     /// least `min_score` (inliers), and count `elapsed` as verification time.
     pub fn verified(
         mut self,
-        map: &MapIndex,
+        map: &dyn MapRead,
         reranked: &[crate::geometry::verify::Reranked],
         top_n: usize,
         min_score: f32,

@@ -1,17 +1,111 @@
-//! `bowloc map build`: index a set of images against a vocabulary.
+//! `bowloc map build`: index a set of images against a vocabulary;
+//! `bowloc map add|remove|list|compact`: change a map file's images through
+//! its change log, as the service's `/images` endpoints do.
 
+use anyhow::Context;
 use bowloc::dataset::image_list;
 use bowloc::geometry::packed::PACKED_BYTES;
-use bowloc::index::Places;
+use bowloc::index::{MapRead, Places};
+use bowloc::live::{Applied, Change, LiveMap, NewImage, now_ms};
+use bowloc::pipeline::Localizer;
 use bowloc::pipeline::build_map;
+use bowloc::server::images::{ImageItem, check_id};
 use bowloc::vocabulary::Vocabulary;
 use clap::{Args, Subcommand};
+use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Subcommand)]
 pub enum MapCommand {
     /// Build a tf-idf inverted index over map images.
     Build(BuildArgs),
+    /// Add an image to a map (or replace the image of the same id), durably
+    /// in the map's change log (MAP.changes).
+    Add(AddArgs),
+    /// Remove an image from a map, durably in its change log.
+    Remove(ChangeArgs),
+    /// List a map's images (changes included) as JSON lines.
+    List(ListArgs),
+    /// Fold a map's change log into a new map file.
+    Compact(ListArgs),
+}
+
+#[derive(Args)]
+pub struct AddArgs {
+    /// Vocabulary file the map was built with.
+    #[arg(long)]
+    vocab: PathBuf,
+    /// Map file.
+    #[arg(long)]
+    map: PathBuf,
+    /// The image's id (its name in the map); default: the file name.
+    #[arg(long)]
+    id: Option<String>,
+    /// Place label.
+    #[arg(long)]
+    place: Option<String>,
+    /// A pose value, FIELD=VALUE for one of the map's pose fields (repeat).
+    #[arg(long = "pose", value_name = "FIELD=VALUE")]
+    pose: Vec<String>,
+    /// The image file.
+    image: PathBuf,
+}
+
+#[derive(Args)]
+pub struct ChangeArgs {
+    /// Map file.
+    #[arg(long)]
+    map: PathBuf,
+    /// The image's id (its name in the map).
+    #[arg(long)]
+    id: String,
+}
+
+#[derive(Args)]
+pub struct ListArgs {
+    /// Map file.
+    #[arg(long)]
+    map: PathBuf,
+}
+
+fn open_live(map: &std::path::Path) -> anyhow::Result<LiveMap> {
+    let (live, opened) = LiveMap::open(map, None, true, usize::MAX)?;
+    if opened.replayed > 0 {
+        tracing::info!(replayed = opened.replayed, "change log replayed");
+    }
+    Ok(live)
+}
+
+fn pose_values(given: &[String], fields: &[String]) -> anyhow::Result<Vec<f64>> {
+    let mut pose = vec![f64::NAN; fields.len()];
+    for g in given {
+        let (k, v) = g
+            .split_once('=')
+            .ok_or_else(|| anyhow::anyhow!("--pose {g}: expected FIELD=VALUE"))?;
+        let i = fields.iter().position(|f| f == k).ok_or_else(|| {
+            anyhow::anyhow!(
+                "--pose {g}: the map's pose fields are [{}]",
+                fields.join(", ")
+            )
+        })?;
+        pose[i] = v
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| anyhow::anyhow!("--pose {g}: `{v}` is not a finite number"))?;
+    }
+    Ok(if given.is_empty() { Vec::new() } else { pose })
+}
+
+fn print_change(id: &str, applied: Applied, generation: u64, features: Option<usize>) {
+    let line = serde_json::json!({
+        "id": id,
+        "index": applied.id,
+        "generation": generation,
+        "replaced": applied.replaced,
+        "features": features,
+    });
+    println!("{line}");
 }
 
 #[derive(Args)]
@@ -37,7 +131,68 @@ pub struct BuildArgs {
 }
 
 pub fn run(command: MapCommand) -> anyhow::Result<()> {
-    let MapCommand::Build(a) = command;
+    match command {
+        MapCommand::Build(a) => build(a),
+        MapCommand::Add(a) => {
+            let id = match &a.id {
+                Some(id) => id.clone(),
+                None => a
+                    .image
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .ok_or_else(|| anyhow::anyhow!("give --id"))?,
+            };
+            check_id(&id).map_err(|e| anyhow::anyhow!("--id {id}: {}", e.message))?;
+            let (localizer, _) = Localizer::open_live(&a.vocab, &a.map, true, usize::MAX)?;
+            let bytes = std::fs::read(&a.image)
+                .with_context(|| format!("{}: cannot read", a.image.display()))?;
+            let features = localizer
+                .map_features(&bytes)
+                .with_context(|| format!("{}", a.image.display()))?;
+            let live = &localizer.map;
+            let pose = pose_values(&a.pose, &live.snapshot().meta().pose_fields)?;
+            let n = features.len();
+            if n == 0 {
+                tracing::warn!(id, "the image has no features: no query can find it");
+            }
+            let (applied, generation) = live.apply(Change::Add(NewImage {
+                name: id.clone(),
+                place: a.place.clone().unwrap_or_default(),
+                pose,
+                features,
+                added_at_ms: now_ms(),
+            }))?;
+            print_change(&id, applied, generation, Some(n));
+            Ok(())
+        }
+        MapCommand::Remove(a) => {
+            let live = open_live(&a.map)?;
+            let (applied, generation) = live.apply(Change::Remove { name: a.id.clone() })?;
+            print_change(&a.id, applied, generation, None);
+            Ok(())
+        }
+        MapCommand::List(a) => {
+            let live = open_live(&a.map)?;
+            let s = live.snapshot();
+            let mut out = std::io::stdout().lock();
+            for j in s.ids() {
+                let item = ImageItem::of(&s, j);
+                writeln!(out, "{}", serde_json::to_string(&item)?)?;
+            }
+            Ok(())
+        }
+        MapCommand::Compact(a) => {
+            let live = open_live(&a.map)?;
+            match live.compact()? {
+                Some(c) => println!("{}", serde_json::to_string(&c)?),
+                None => tracing::info!("no changes to fold"),
+            }
+            Ok(())
+        }
+    }
+}
+
+fn build(a: BuildArgs) -> anyhow::Result<()> {
     let vocab = Vocabulary::open(&a.vocab, true)?;
     let images = image_list(&a.images)?;
     let places = a.places.as_deref().map(Places::from_csv).transpose()?;

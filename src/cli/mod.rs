@@ -34,7 +34,7 @@ enum Command {
     /// Build a visual vocabulary (k-means over SIFT descriptors).
     #[command(subcommand)]
     Vocab(vocab::VocabCommand),
-    /// Build a map index from images.
+    /// Build a map index from images; add, remove and list its images.
     #[command(subcommand)]
     Map(map::MapCommand),
     /// Localize images against a map and print the results as JSON.

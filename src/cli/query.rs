@@ -2,6 +2,7 @@
 
 use super::args::{SearchArgs, SequenceArgs, VerifyArgs};
 use bowloc::features::TileGrid;
+use bowloc::index::MapRead;
 use bowloc::pipeline::Localizer;
 use bowloc::report::SequenceAnswer;
 use bowloc::sequence::{Filter, Topology, TopologyKind};
@@ -43,10 +44,11 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     localizer.set_verify(a.verify.params()?);
     let options = a.search.options()?;
     let model = a.model.model()?;
+    let snapshot = localizer.map.snapshot();
     let topology = Topology::of(
         TopologyKind::Auto,
-        localizer.map.meta().images,
-        localizer.map.positions(),
+        snapshot.meta().images,
+        snapshot.positions(),
     )
     .map_err(anyhow::Error::msg)?;
     let mut filter = Filter::new();
@@ -59,7 +61,7 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
         if let (Some(p), Some(post)) = (&prediction, answer.posterior.take()) {
             filter.update(post, p);
             answer.sequence = filter.belief().map(|b| {
-                SequenceAnswer::new(&localizer.map, "cli", p, filter.frames(), b, options.top_n)
+                SequenceAnswer::new(&*snapshot, "cli", p, filter.frames(), b, options.top_n)
             });
         }
         let mut value = serde_json::to_value(&answer)?;

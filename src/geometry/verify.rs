@@ -9,7 +9,7 @@
 use super::Keypoint;
 use super::matches::{Correspondences, QueryFeatures, tentative};
 use super::packed::PackedFeature;
-use crate::index::MapIndex;
+use crate::index::MapRead;
 use crate::search::LeaderCheck;
 use serde::{Deserialize, Serialize};
 
@@ -280,7 +280,7 @@ pub fn fit_inliers(
 /// matched positions in each image's extraction frame (what a page draws
 /// as match lines).
 pub fn inlier_matches(
-    map: &MapIndex,
+    map: &dyn MapRead,
     image: u32,
     query: &[(u32, Keypoint)],
     fit: &dyn ModelFit,
@@ -309,7 +309,7 @@ pub fn verify_features(
 /// search calls mid-way to decide whether it may stop. Cheap enough for
 /// every block (one merge and one fit).
 pub fn verify_leader(
-    map: &MapIndex,
+    map: &dyn MapRead,
     leader: u32,
     query_so_far: &[(u32, Keypoint)],
     fit: &dyn ModelFit,
@@ -328,7 +328,7 @@ pub fn verify_leader(
 /// the query features voted so far, verified as the final answer is.
 /// `keypoints` holds every feature given to the search, by feature number.
 pub struct LeaderVerifier<'a> {
-    pub map: &'a MapIndex,
+    pub map: &'a dyn MapRead,
     pub fit: &'a dyn ModelFit,
     pub params: &'a VerifyParams,
     pub keypoints: &'a [Keypoint],
@@ -370,7 +370,7 @@ impl Reranked {
 /// first) and order them by inliers, ties kept in vote order; candidates
 /// beyond the top k follow in vote order.
 pub fn rerank(
-    map: &MapIndex,
+    map: &dyn MapRead,
     candidates: &[(u32, f32)],
     query: &[(u32, Keypoint)],
     fit: &dyn ModelFit,

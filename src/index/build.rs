@@ -70,16 +70,22 @@ impl MapBuilder {
     /// Compute idf, the normalised tf-idf vectors and the postings.
     /// `name` names the map; `vocab_hash` is the vocabulary's `hash_hex()`.
     pub fn build(self, name: &str, vocab_hash: &str, places: Option<&Places>) -> MapIndex {
+        let idf = self.idf();
+        self.build_with_idf(idf, name, vocab_hash, places)
+    }
+
+    /// idf(w) = ln(N/df(w)) over the images collected (0 for a word in no image).
+    pub fn idf(&self) -> Vec<f32> {
         let n_images = self.images.len();
-        let k = self.words;
-        let mut df = vec![0u32; k];
+        let mut df = vec![0u32; self.words];
         for image in &self.images {
             for &(w, _) in &image.counts {
-                df[w as usize] += 1;
+                if let Some(d) = df.get_mut(w as usize) {
+                    *d += 1;
+                }
             }
         }
-        let idf: Vec<f32> = df
-            .iter()
+        df.iter()
             .map(|&d| {
                 if d == 0 {
                     0.0
@@ -87,14 +93,26 @@ impl MapBuilder {
                     (n_images as f64 / d as f64).ln() as f32
                 }
             })
-            .collect();
+            .collect()
+    }
 
+    /// [`build`](Self::build) under a given idf (one per word), e.g. the
+    /// idf a live map froze at its last compaction.
+    pub fn build_with_idf(
+        self,
+        idf: Vec<f32>,
+        name: &str,
+        vocab_hash: &str,
+        places: Option<&Places>,
+    ) -> MapIndex {
+        let n_images = self.images.len();
+        let k = self.words;
         // d̂_j(w) for each image's words, in parallel.
-        let weighted: Vec<Vec<(u32, f32)>> = self
+        let (weighted, image_max): (Vec<Vec<(u32, f32)>>, Vec<f32>) = self
             .images
             .par_iter()
-            .map(|image| normalized_tfidf(image, &idf))
-            .collect();
+            .map(|image| weigh(image, &idf))
+            .unzip();
 
         // CSR by word: counting sort keeps image ids ascending in each list.
         let mut offsets = vec![0u64; k + 1];
@@ -118,15 +136,6 @@ impl MapBuilder {
                 fill[w as usize] += 1;
             }
         }
-        let image_max: Vec<f32> = weighted
-            .iter()
-            .map(|entries| {
-                entries
-                    .iter()
-                    .map(|&(w, v)| idf[w as usize] * v)
-                    .fold(0.0, f32::max)
-            })
-            .collect();
 
         let mut geometry_offsets = Vec::with_capacity(n_images + 1);
         geometry_offsets.push(0u64);
@@ -160,6 +169,7 @@ impl MapBuilder {
             pose_fields,
             features: self.images.iter().map(|i| i.features as u64).sum(),
             images_without_features: self.images.iter().filter(|i| i.features == 0).count(),
+            generation: 0,
         };
         let arrays = MapArrays {
             idf,
@@ -177,13 +187,20 @@ impl MapBuilder {
     }
 }
 
-/// tf·idf of one image, L2-normalised; words of zero weight are dropped.
-fn normalized_tfidf(image: &ImageWords, idf: &[f32]) -> Vec<(u32, f32)> {
+/// tf·idf of one image, L2-normalised, under `idf`: its postings entries
+/// (word ascending; words of zero weight are dropped) and its largest vote
+/// max_w idf(w)·d̂(w). Words beyond `idf` weigh 0.
+pub fn weigh(image: &ImageWords, idf: &[f32]) -> (Vec<(u32, f32)>, f32) {
     let n = image.features.max(1) as f32;
     let mut entries: Vec<(u32, f32)> = image
         .counts
         .iter()
-        .map(|&(w, c)| (w, c as f32 / n * idf[w as usize]))
+        .map(|&(w, c)| {
+            (
+                w,
+                c as f32 / n * idf.get(w as usize).copied().unwrap_or(0.0),
+            )
+        })
         .filter(|&(_, v)| v > 0.0)
         .collect();
     let norm = entries.iter().map(|&(_, v)| v * v).sum::<f32>().sqrt();
@@ -192,7 +209,11 @@ fn normalized_tfidf(image: &ImageWords, idf: &[f32]) -> Vec<(u32, f32)> {
             e.1 /= norm;
         }
     }
-    entries
+    let max = entries
+        .iter()
+        .map(|&(w, v)| idf[w as usize] * v)
+        .fold(0.0, f32::max);
+    (entries, max)
 }
 
 #[cfg(test)]

@@ -26,6 +26,11 @@ pub struct MapMeta {
     /// Features over all map images.
     pub features: u64,
     pub images_without_features: usize,
+    /// The change log's generation this file includes: 0 for a map built
+    /// from images, the generation it was folded at for a compacted one
+    /// (`crate::live`).
+    #[serde(default)]
+    pub generation: u64,
 }
 
 pub(super) fn save(map: &MapIndex, path: &Path) -> Result<(), StoreError> {
@@ -70,6 +75,7 @@ pub(super) fn view(store: &Store) -> Result<MapView<'_>, StoreError> {
         geometry_offsets: store.u64s("geometry.offsets")?,
         geometry: bytemuck::try_cast_slice(store.u32s("geometry.features")?)
             .map_err(|_| store.invalid("geometry.features is not whole features"))?,
+        overlay: None,
     })
 }
 

@@ -95,26 +95,28 @@ pub(super) fn image_info<'a>(
 ) -> ImageInfo<'a> {
     let i = id as usize;
     let place = Some(view.places.get(i)).filter(|p| !p.is_empty());
-    let pose = if pose_fields.is_empty() {
-        None
-    } else {
-        let p = pose_fields.len();
-        view.poses.get(i * p..(i + 1) * p).and_then(|row| {
-            let known: HashMap<&str, f64> = pose_fields
-                .iter()
-                .zip(row)
-                .filter(|(_, v)| v.is_finite())
-                .map(|(k, &v)| (k.as_str(), v))
-                .collect();
-            (!known.is_empty()).then_some(known)
-        })
-    };
+    let p = pose_fields.len();
+    let pose = view
+        .poses
+        .get(i * p..(i + 1) * p)
+        .and_then(|row| pose_of(pose_fields, row));
     ImageInfo {
         id,
         name: view.names.get(i),
         place,
         pose,
     }
+}
+
+/// The known (finite) values of a pose row by field name; `None` when none is.
+pub fn pose_of<'a>(pose_fields: &'a [String], row: &[f64]) -> Option<HashMap<&'a str, f64>> {
+    let known: HashMap<&str, f64> = pose_fields
+        .iter()
+        .zip(row)
+        .filter(|(_, v)| v.is_finite())
+        .map(|(k, &v)| (k.as_str(), v))
+        .collect();
+    (!known.is_empty()).then_some(known)
 }
 
 /// Place labels and poses for map images, read from a CSV whose header is

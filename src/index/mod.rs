@@ -10,12 +10,14 @@
 pub mod build;
 mod file;
 pub mod metadata;
+pub mod overlay;
 mod postings;
 pub mod synthetic;
 
 pub use build::{ImageWords, MapBuilder};
 pub use file::MapMeta;
 pub use metadata::{ImageInfo, Places, StringTable};
+pub use overlay::Overlay;
 pub use postings::Postings;
 
 use crate::geometry::packed::PackedFeature;
@@ -61,6 +63,55 @@ pub struct MapView<'a> {
     pub poses: &'a [f64],
     pub geometry_offsets: &'a [u64],
     pub geometry: &'a [PackedFeature],
+    /// Images added and removed since the file was written (none for a
+    /// map file on its own).
+    pub overlay: Option<&'a Overlay>,
+}
+
+/// What a search reads of a map: a map file on its own ([`MapIndex`]) or a
+/// map file with changes on top (`crate::live::Snapshot`). Ids are those of
+/// [`MapView`]: the file's images, then the added ones.
+pub trait MapRead: Send + Sync {
+    /// All arrays, borrowed (take it once per query).
+    fn view(&self) -> MapView<'_>;
+    /// What the map is (for a map with changes: its images now).
+    fn meta(&self) -> &MapMeta;
+    /// Name, place label and pose of image `id`.
+    fn image(&self, id: u32) -> ImageInfo<'_>;
+    /// The stored features of image `id`, sorted by word.
+    fn geometry(&self, id: u32) -> &[PackedFeature];
+    /// Each image's position (pose fields `x` and `y`; NaN where unknown),
+    /// when the map has both fields.
+    fn positions(&self) -> Option<Vec<[f64; 2]>> {
+        let fields = &self.meta().pose_fields;
+        let x = fields.iter().position(|f| f == "x")?;
+        let y = fields.iter().position(|f| f == "y")?;
+        let poses = self.view().poses;
+        let n = fields.len();
+        Some(
+            (0..self.meta().images)
+                .map(|i| {
+                    let at = |k: usize| poses.get(i * n + k).copied().unwrap_or(f64::NAN);
+                    [at(x), at(y)]
+                })
+                .collect(),
+        )
+    }
+}
+
+impl MapRead for MapIndex {
+    fn view(&self) -> MapView<'_> {
+        MapIndex::view(self)
+    }
+    fn meta(&self) -> &MapMeta {
+        MapIndex::meta(self)
+    }
+    fn image(&self, id: u32) -> ImageInfo<'_> {
+        MapIndex::image(self, id)
+    }
+    fn geometry(&self, id: u32) -> &[PackedFeature] {
+        MapIndex::geometry(self, id)
+    }
 }
 
 impl MapIndex {
@@ -73,6 +124,26 @@ impl MapIndex {
 
     pub fn meta(&self) -> &MapMeta {
         &self.meta
+    }
+
+    /// The same map, recorded as including the change log up to `generation`.
+    pub fn with_generation(mut self, generation: u64) -> Self {
+        self.meta.generation = generation;
+        self
+    }
+
+    /// What identifies this map's content: the file's section-table checksum
+    /// (which covers every section's checksum), or for a map held in memory
+    /// a hash of its metadata.
+    pub fn fingerprint(&self) -> u64 {
+        match &self.backing {
+            Backing::Mapped(store) => store.table_checksum(),
+            Backing::Owned(_) => crate::store::checksum(
+                serde_json::to_string(&self.meta)
+                    .unwrap_or_default()
+                    .as_bytes(),
+            ),
+        }
     }
 
     /// Number of map images.
@@ -97,27 +168,10 @@ impl MapIndex {
                 poses: &a.poses,
                 geometry_offsets: &a.geometry_offsets,
                 geometry: &a.geometry,
+                overlay: None,
             },
             Backing::Mapped(store) => file::view(store).expect("validated on load"),
         }
-    }
-
-    /// Each image's position (pose fields `x` and `y`; NaN where unknown),
-    /// when the map has both fields.
-    pub fn positions(&self) -> Option<Vec<[f64; 2]>> {
-        let fields = &self.meta.pose_fields;
-        let x = fields.iter().position(|f| f == "x")?;
-        let y = fields.iter().position(|f| f == "y")?;
-        let poses = self.view().poses;
-        let n = fields.len();
-        Some(
-            (0..self.meta.images)
-                .map(|i| {
-                    let at = |k: usize| poses.get(i * n + k).copied().unwrap_or(f64::NAN);
-                    [at(x), at(y)]
-                })
-                .collect(),
-        )
     }
 
     /// Name, place label and pose of map image `id`.

@@ -33,7 +33,7 @@ pub use stop::{LeaderCheck, RuleSpec, StopRule};
 pub use trace::{Trace, TracePoint};
 pub use vote::{Needs, Tally, VoteStats, Voter};
 
-use crate::index::MapIndex;
+use crate::index::MapRead;
 use crate::quantize::Quantizer;
 use ndarray::{Array2, ArrayView2};
 use serde::Serialize;
@@ -183,7 +183,7 @@ pub struct Search<'m> {
 }
 
 impl<'m> Search<'m> {
-    pub fn new(map: &'m MapIndex, options: &SearchOptions) -> Self {
+    pub fn new(map: &'m dyn MapRead, options: &SearchOptions) -> Self {
         let rule = options.rule.build(&stop::RuleContext {
             top_n: options.top_n,
             prior: options.prior.clone(),
@@ -389,7 +389,7 @@ impl<'m> Search<'m> {
 /// Search with descriptors: quantize each block of permuted rows with `quantizer`.
 pub fn search(
     quantizer: &dyn Quantizer,
-    map: &MapIndex,
+    map: &dyn MapRead,
     descriptors: ArrayView2<'_, f32>,
     options: &SearchOptions,
 ) -> SearchOutcome {
@@ -423,7 +423,7 @@ pub fn descriptor_quantizer<'q>(
 /// evaluation). Returns the outcome, the (feature number, word) pairs voted
 /// and the tiles extracted.
 pub fn search_tiles(
-    map: &MapIndex,
+    map: &dyn MapRead,
     tiles: &[(&[u32], f64)],
     options: &SearchOptions,
     mut leader_check: Option<&mut dyn LeaderCheck>,
@@ -454,7 +454,7 @@ pub fn search_tiles(
 /// Search over words already known: feature i quantizes to `words[i]`. Gives
 /// exactly the outcome of [`search`] with a quantizer that returns those words
 /// (used by evaluation, which quantizes each query once and votes many times).
-pub fn search_words(map: &MapIndex, words: &[u32], options: &SearchOptions) -> SearchOutcome {
+pub fn search_words(map: &dyn MapRead, words: &[u32], options: &SearchOptions) -> SearchOutcome {
     search_with(map, words.len(), options, |indices, out| {
         for (o, &i) in out.iter_mut().zip(indices) {
             *o = words[i as usize];
@@ -465,7 +465,7 @@ pub fn search_words(map: &MapIndex, words: &[u32], options: &SearchOptions) -> S
 /// One batch of `total` features. `quantize(indices, words)` fills
 /// `words[..indices.len()]` with the words of the features at `indices`.
 pub fn search_with(
-    map: &MapIndex,
+    map: &dyn MapRead,
     total: usize,
     options: &SearchOptions,
     quantize: impl FnMut(&[u32], &mut [u32]),

@@ -51,6 +51,7 @@ impl Shard {
             poses: &[],
             geometry_offsets: &[],
             geometry: &[],
+            overlay: None,
         }
     }
 }

@@ -1,5 +1,5 @@
 use super::*;
-use crate::index::{ImageWords, MapBuilder};
+use crate::index::{ImageWords, MapBuilder, MapIndex};
 use crate::quantize::ExactQuantizer;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -9,8 +9,11 @@
 //! The rules read the statistics through [`VoteStats`], which the voter
 //! implements; a search over a map split into shards implements it too, from
 //! the statistics each shard reports ([`super::shard`]).
+//! A map with changes ([`Overlay`]) is voted the same way: w's list in the
+//! file, skipping removed images, then w's list of added images.
 
-use crate::index::{MapView, Postings};
+use crate::index::overlay::{Flat, is_set};
+use crate::index::{MapView, Overlay, Postings};
 
 /// Running statistics of the histogram after `features` votes.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -176,6 +179,11 @@ pub struct Voter<'a> {
     postings: Postings<'a>,
     idf: &'a [f32],
     image_max: &'a [f32],
+    overlay: Option<&'a Overlay>,
+    /// The overlay's added postings, flat.
+    added: Option<&'a Flat>,
+    /// Removed ids (bitset; empty without an overlay).
+    removed: &'a [u64],
     hist: Vec<f32>,
     touched: Vec<u32>,
     top: TopK,
@@ -192,18 +200,27 @@ impl<'a> Voter<'a> {
 
     /// A voter that also tracks what `needs` asks for.
     pub fn with_needs(map: &MapView<'a>, needs: Needs) -> Self {
-        let images = map.image_max.len();
-        let vote_cap = map.image_max.iter().copied().fold(0.0, f32::max);
+        let overlay = map.overlay;
+        let ids = overlay.map_or(map.image_max.len(), |o| o.ids() as usize);
+        let removed = overlay.map_or(0, |o| o.removed());
+        let vote_cap = map
+            .image_max
+            .iter()
+            .copied()
+            .fold(overlay.map_or(0.0, |o| o.vote_cap()), f32::max);
         Self {
             postings: map.postings,
             idf: map.idf,
             image_max: map.image_max,
-            hist: vec![0.0; images],
+            overlay,
+            added: overlay.map(|o| o.flat()),
+            removed: overlay.map_or(&[], |o| o.removed_bits()),
+            hist: vec![0.0; ids],
             touched: Vec::new(),
             top: TopK::new(needs.top.max(2)),
-            squares: needs.squares.then(|| (vec![0.0; images], TopK::new(2))),
+            squares: needs.squares.then(|| (vec![0.0; ids], TopK::new(2))),
             tally: Tally {
-                images,
+                images: ids - removed,
                 vote_cap,
                 ..Tally::default()
             },
@@ -233,21 +250,22 @@ impl<'a> Voter<'a> {
         }
         let (images, weights) = self.postings.list(w);
         let mut added = 0.0f64;
-        for (&j, &d) in images.iter().zip(weights) {
-            let Some(h) = self.hist.get_mut(j as usize) else {
-                continue;
-            };
-            let v = factor * d;
-            if *h == 0.0 {
-                self.touched.push(j);
+        if self.removed.is_empty() {
+            for (&j, &d) in images.iter().zip(weights) {
+                added += self.cast(j, factor * d);
             }
-            *h += v;
-            added += v as f64;
-            self.top.update(j, *h);
-            if let Some((sq, sq_top)) = &mut self.squares {
-                let s = &mut sq[j as usize];
-                *s += v * v;
-                sq_top.update(j, *s);
+        } else {
+            for (&j, &d) in images.iter().zip(weights) {
+                if !is_set(self.removed, j) {
+                    added += self.cast(j, factor * d);
+                }
+            }
+        }
+        if let Some(flat) = self.added {
+            for &(j, d) in flat.list(w) {
+                if !is_set(self.removed, j) {
+                    added += self.cast(j, factor * d);
+                }
             }
         }
         let t = &mut self.tally;
@@ -258,6 +276,25 @@ impl<'a> Voter<'a> {
             t.max = max;
             t.second = items.get(1).map_or(0.0, |e| e.0);
         }
+    }
+
+    /// Add vote `v` to image `j`; returns what was added.
+    #[inline]
+    fn cast(&mut self, j: u32, v: f32) -> f64 {
+        let Some(h) = self.hist.get_mut(j as usize) else {
+            return 0.0;
+        };
+        if *h == 0.0 {
+            self.touched.push(j);
+        }
+        *h += v;
+        self.top.update(j, *h);
+        if let Some((sq, sq_top)) = &mut self.squares {
+            let s = &mut sq[j as usize];
+            *s += v * v;
+            sq_top.update(j, *s);
+        }
+        v as f64
     }
 
     /// The raw histogram h.
@@ -309,7 +346,10 @@ impl VoteStats for Voter<'_> {
     }
 
     fn image_vote_cap(&self, j: u32) -> f32 {
-        self.image_max.get(j as usize).copied().unwrap_or(0.0)
+        match self.image_max.get(j as usize) {
+            Some(&m) => m,
+            None => self.overlay.and_then(|o| o.image_max(j)).unwrap_or(0.0),
+        }
     }
 
     fn best_outside(&self, n: usize, left: f32) -> f32 {

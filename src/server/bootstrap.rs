@@ -90,7 +90,7 @@ pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
         verify = files.verify,
         "loading"
     );
-    let mut localizer = Localizer::open(&files.vocabulary, &files.map, files.verify)?;
+    let mut localizer = open(config)?;
     localizer.limits = DecodeLimits {
         max_pixels: config.limits.pixels,
     };
@@ -112,6 +112,38 @@ pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
 }
 
 /// `A is missing` or `A and B are missing`.
+/// The vocabulary and map, the map with its change log (replayed) when
+/// writes are configured or a log exists; otherwise read only, and no log
+/// is created.
+fn open(config: &Config) -> anyhow::Result<Localizer> {
+    let files = &config.files;
+    let log = crate::live::log::path_for(&files.map);
+    if config.auth.write_token.is_none() && !log.exists() {
+        return Localizer::open(&files.vocabulary, &files.map, files.verify);
+    }
+    let (localizer, opened) = Localizer::open_live(
+        &files.vocabulary,
+        &files.map,
+        files.verify,
+        config.changes.max_images,
+    )?;
+    let status = localizer.map.status();
+    tracing::info!(
+        log = %log.display(),
+        replayed = opened.replayed,
+        generation = status.generation,
+        images = status.images,
+        "change log opened"
+    );
+    if opened.reset {
+        tracing::warn!(
+            log = %log.display(),
+            "the change log held only changes the map file already has (a compaction was              interrupted); emptied"
+        );
+    }
+    Ok(localizer)
+}
+
 fn missing(config: &Config) -> String {
     let names: Vec<String> = [&config.files.vocabulary, &config.files.map]
         .into_iter()

@@ -32,6 +32,10 @@ pub struct Config {
     pub verify: VerifyParams,
     /// Sequences of frames (`/localize?sequence=NAME`).
     pub sequence: SequenceConfig,
+    /// Who may change the map.
+    pub auth: AuthConfig,
+    /// The map's changes: compaction and size cap.
+    pub changes: ChangesConfig,
 }
 
 /// Sequences: their bounds, the map's topology and the filter's model
@@ -114,6 +118,51 @@ impl SequenceConfig {
 
     pub fn idle(&self) -> Duration {
         Duration::from_millis(self.idle_ms)
+    }
+}
+
+/// The token the write endpoints require (`Authorization: Bearer TOKEN`);
+/// without one they are disabled.
+#[derive(Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AuthConfig {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub write_token: Option<String>,
+}
+
+impl std::fmt::Debug for AuthConfig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // never print the token
+        let token = self.write_token.as_ref().map(|_| "…");
+        f.debug_struct("AuthConfig")
+            .field("write_token", &token)
+            .finish()
+    }
+}
+
+/// Least length of a write token.
+pub const MIN_TOKEN_LEN: usize = 16;
+
+/// When the change log is folded into the map file, and how large the map
+/// may grow.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ChangesConfig {
+    /// Compact this often (seconds) when there are changes; 0 = never on a schedule.
+    pub compact_interval_s: u64,
+    /// Compact once the change log holds this many bytes; 0 = never on size.
+    pub compact_log_bytes: u64,
+    /// Most images the map may hold; an add beyond is refused.
+    pub max_images: usize,
+}
+
+impl Default for ChangesConfig {
+    fn default() -> Self {
+        Self {
+            compact_interval_s: 3600,
+            compact_log_bytes: 64 << 20,
+            max_images: 1_000_000,
+        }
     }
 }
 
@@ -521,6 +570,19 @@ impl Config {
                 "sequence.max_sequences / sequence.idle_ms",
                 "must be at least 1".into(),
             );
+        }
+        if let Some(t) = &self.auth.write_token
+            && (t.len() < MIN_TOKEN_LEN || !t.bytes().all(|b| b.is_ascii_graphic()))
+        {
+            return bad(
+                "auth.write_token",
+                format!(
+                    "must be at least {MIN_TOKEN_LEN} printable ASCII characters without spaces"
+                ),
+            );
+        }
+        if self.changes.max_images == 0 {
+            return bad("changes.max_images", "must be at least 1".into());
         }
         if self.bootstrap.enabled && self.bootstrap.words < 2 {
             return bad("bootstrap.words", "must be at least 2".into());

@@ -38,9 +38,15 @@ pub const CODES: &[(u16, &str)] = &[
     (400, "invalid_multipart"),
     (400, "missing_image_field"),
     (400, "body_read_error"),
+    (400, "invalid_id"),
+    (401, "unauthorized"),
+    (403, "forbidden"),
+    (403, "writes_disabled"),
     (404, "not_found"),
     (404, "unknown_sequence"),
+    (404, "image_not_found"),
     (405, "method_not_allowed"),
+    (409, "write_conflict"),
     (408, "request_timeout"),
     (408, "body_timeout"),
     (413, "body_too_large"),
@@ -56,6 +62,8 @@ pub const CODES: &[(u16, &str)] = &[
     (503, "queue_timeout"),
     (503, "deadline_exceeded"),
     (503, "shutting_down"),
+    (503, "storage_unavailable"),
+    (507, "map_full"),
 ];
 
 /// An error answer.
@@ -197,6 +205,16 @@ impl ApiError {
             StatusCode::SERVICE_UNAVAILABLE,
             "shutting_down",
             "the service is shutting down",
+        )
+        .retry_after(5)
+    }
+
+    /// The change log or map file cannot be written: nothing was changed.
+    pub fn storage_unavailable(message: impl Into<String>) -> Self {
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "storage_unavailable",
+            message,
         )
         .retry_after(5)
     }

@@ -8,6 +8,7 @@ use super::openapi::Binary;
 use super::proto;
 use super::workers::PoolError;
 use crate::features::TileGrid;
+use crate::index::MapRead;
 use crate::pipeline::Tracing;
 use crate::report::{Localization, SequenceAnswer};
 use crate::search::stop::{GENERIC_PARAMETER, parse_rule};
@@ -416,7 +417,7 @@ fn body_error(
 }
 
 /// The image bytes of the request.
-async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiError> {
+pub(super) async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiError> {
     let limit = state.config.limits.body_bytes;
     let kind = body_kind(request.headers())?;
     let declared = request
@@ -550,16 +551,17 @@ pub async fn localize(
     let tracing = params.tracing()?;
     options.deadline = Some(deadline);
     let model = state.config.sequence.model();
+    let snapshot = localizer.map.snapshot();
     let allowed = match near {
         Some(n) => {
-            let positions = localizer.map.positions().ok_or_else(|| {
+            let positions = snapshot.positions().ok_or_else(|| {
                 ApiError::invalid_parameter("near", "the map has no poses with fields x and y")
             })?;
             Some(n.images(&positions))
         }
         None => None,
     };
-    let images = localizer.map.meta().images;
+    let images = snapshot.meta().images;
     if let Some(ids) = &allowed
         && sequence.is_none()
     {
@@ -610,14 +612,7 @@ pub async fn localize(
             Ok(worker_localizer.localize_traced(&image, &options, tiles, verify, tracing)?)
         })
         .await
-        .map_err(|e| match e {
-            PoolError::QueueFull => ApiError::overloaded(state.pool.queue_capacity()),
-            PoolError::TimedOut => ApiError::queue_timeout(),
-            PoolError::Panicked(m) => {
-                tracing::error!("localization panicked: {m}");
-                ApiError::internal("the query failed unexpectedly")
-            }
-        })??;
+        .map_err(|e| pool_error(&state, e, "localization"))??;
     if answer.stop.kind == crate::search::StopKind::Deadline && answer.features.used == 0 {
         return Err(ApiError::deadline_exceeded()); // the deadline passed before any vote
     }
@@ -631,7 +626,7 @@ pub async fn localize(
         filter.update(posterior, &prediction);
         let belief = filter.belief().expect("just updated");
         answer.sequence = Some(SequenceAnswer::new(
-            &localizer.map,
+            &*snapshot,
             name,
             &prediction,
             filter.frames(),
@@ -648,6 +643,19 @@ pub async fn localize(
     let mut response = encode(&answer, format);
     response.extensions_mut().insert(summary);
     Ok(response)
+}
+
+/// The answer when the worker pool did not run a job (`what`: its name in
+/// the log).
+pub(super) fn pool_error(state: &AppState, e: PoolError, what: &str) -> ApiError {
+    match e {
+        PoolError::QueueFull => ApiError::overloaded(state.pool.queue_capacity()),
+        PoolError::TimedOut => ApiError::queue_timeout(),
+        PoolError::Panicked(m) => {
+            tracing::error!("{what} panicked: {m}");
+            ApiError::internal(format!("the {what} failed unexpectedly"))
+        }
+    }
 }
 
 fn encode(answer: &Localization, format: Format) -> Response {

@@ -7,7 +7,7 @@
 //! `process_open_fds`, `process_cpu_seconds_total`, …) are read at each
 //! scrape.
 
-use crate::index::MapIndex;
+use crate::index::MapRead;
 use crate::report::Localization;
 use metrics::{
     Unit, counter, describe_counter, describe_gauge, describe_histogram, gauge, histogram,
@@ -315,7 +315,7 @@ pub fn pool(workers: usize, busy: usize, waiting: usize, capacity: usize) {
 }
 
 /// The map is loaded.
-pub fn map_loaded(map: &MapIndex) {
+pub fn map_loaded(map: &dyn MapRead) {
     let m = map.meta();
     gauge!(MAP_IMAGES).set(m.images as f64);
     gauge!(MAP_WORDS).set(m.words as f64);

@@ -12,6 +12,8 @@
 //! - [`localize`]: `POST /localize`, its parameters and body;
 //! - [`sequences`]: the per-sequence state of `/localize?sequence=NAME`
 //!   (bounded, one lock each) and `DELETE /sequences/{name}`;
+//! - [`images`]: the map's images (add, remove, list), compaction, and the
+//!   write token;
 //! - [`status`]: health, readiness, `/map`, `/metrics`, `/openapi.json`;
 //! - [`page`]: the page for people at `GET /`, its script and style;
 //! - [`thumbnails`]: `GET /images/{id}/thumbnail`, map images for the page;
@@ -25,6 +27,7 @@ pub mod bootstrap;
 pub mod config;
 pub mod connections;
 pub mod errors;
+pub mod images;
 pub mod localize;
 pub mod metrics;
 pub mod middleware;
@@ -36,10 +39,11 @@ pub mod status;
 pub mod thumbnails;
 pub mod workers;
 
+use crate::index::MapRead;
 use crate::pipeline::Localizer;
 use axum::Router;
 use axum::extract::DefaultBodyLimit;
-use axum::routing::{delete, get, post};
+use axum::routing::{delete, get, post, put};
 use config::Config;
 use errors::ApiError;
 use localize::Defaults;
@@ -71,6 +75,10 @@ pub struct AppState {
     /// Map images made small for the page.
     thumbnails: thumbnails::ThumbnailCache,
     shutting_down: AtomicBool,
+    /// Image ids being written now.
+    writing: images::Writing,
+    /// A compaction is running or about to.
+    compacting: Arc<AtomicBool>,
 }
 
 impl AppState {
@@ -107,13 +115,16 @@ impl AppState {
             loading: bootstrap::Progress::default(),
             thumbnails: thumbnails::ThumbnailCache::default(),
             shutting_down: AtomicBool::new(false),
+            writing: images::Writing::default(),
+            compacting: Arc::new(AtomicBool::new(false)),
         }))
     }
 
     /// Make the service ready with this vocabulary and map.
     pub fn set_localizer(&self, localizer: Localizer) {
-        metrics::map_loaded(&localizer.map);
-        let m = localizer.map.meta();
+        let snapshot = localizer.map.snapshot();
+        metrics::map_loaded(&*snapshot);
+        let m = snapshot.meta();
         tracing::info!(
             map = %m.name,
             images = m.images,
@@ -123,10 +134,11 @@ impl AppState {
             queue = self.pool.queue_capacity(),
             "ready"
         );
+        let snapshot = localizer.map.snapshot();
         let topology = crate::sequence::Topology::of(
             self.config.sequence.topology,
-            localizer.map.meta().images,
-            localizer.map.positions(),
+            snapshot.meta().images,
+            snapshot.positions(),
         );
         if let Err(e) = &topology {
             tracing::error!("sequence.topology: {e}; requests with a sequence will be refused");
@@ -155,6 +167,32 @@ impl AppState {
         }
     }
 
+    /// After a change: the map's gauges, and a compaction in the background
+    /// once the log holds `changes.compact_log_bytes`.
+    pub fn after_write(&self, localizer: &Arc<Localizer>) {
+        metrics::map_loaded(&*localizer.map.snapshot());
+        let threshold = self.config.changes.compact_log_bytes;
+        if threshold > 0 && localizer.map.log_bytes() >= threshold {
+            self.compact_in_background(localizer, "log size");
+        }
+    }
+
+    /// Start a compaction on a blocking thread unless one is running.
+    pub fn compact_in_background(&self, localizer: &Arc<Localizer>, why: &'static str) {
+        if self.compacting.swap(true, Ordering::SeqCst) {
+            return;
+        }
+        let (localizer, flag) = (localizer.clone(), self.compacting.clone());
+        tokio::task::spawn_blocking(move || {
+            tracing::info!("compacting the map ({why})");
+            if let Err(e) = localizer.map.compact() {
+                tracing::error!("compaction failed: {e}");
+            }
+            metrics::map_loaded(&*localizer.map.snapshot());
+            flag.store(false, Ordering::SeqCst);
+        });
+    }
+
     pub fn begin_shutdown(&self) {
         self.shutting_down.store(true, Ordering::SeqCst);
         metrics::ready(false);
@@ -179,6 +217,25 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/healthz", get(status::healthz))
         .route("/readyz", get(status::readyz))
         .route("/map", get(status::map))
+        .route("/images", get(images::list_images))
+        .route(
+            "/images/{id}",
+            get(images::get_image).merge(
+                put(images::put_image)
+                    .delete(images::delete_image)
+                    .route_layer(axum::middleware::from_fn_with_state(
+                        state.clone(),
+                        images::require_write_token,
+                    )),
+            ),
+        )
+        .route(
+            "/map/compact",
+            post(images::compact).route_layer(axum::middleware::from_fn_with_state(
+                state.clone(),
+                images::require_write_token,
+            )),
+        )
         .route("/metrics", get(status::metrics))
         .route("/openapi.json", get(status::openapi))
         .route("/", get(page::index))
@@ -247,6 +304,7 @@ pub async fn serve(
             }
         })
     };
+    let mut compactor: Option<tokio::task::JoinHandle<()>> = None;
     let loader_state = state.clone();
     let mut loader = Some(tokio::task::spawn_blocking(move || {
         bootstrap::load(&loader_state.config, &loader_state.loading)
@@ -263,7 +321,8 @@ pub async fn serve(
                         // each worker runs one query on one core and OpenCV
                         // does not fan out too (docs/performance.md).
                         crate::features::set_opencv_threads(state.config.server.opencv_threads);
-                        state.set_localizer(localizer)
+                        state.set_localizer(localizer);
+                        compactor = schedule_compaction(&state);
                     }
                     Ok(Err(e)) => break Err(e.context("cannot load the vocabulary and map")),
                     Err(e) => break Err(anyhow::anyhow!("loading the map failed: {e}")),
@@ -293,6 +352,9 @@ pub async fn serve(
         );
     }
     upkeep.abort();
+    if let Some(c) = compactor {
+        c.abort();
+    }
     let pool = state.pool.clone();
     if !matches!(
         tokio::task::spawn_blocking(move || {
@@ -310,6 +372,28 @@ pub async fn serve(
     }
     tracing::info!("stopped");
     outcome
+}
+
+/// Compact every `changes.compact_interval_s` seconds while there are
+/// changes (none when 0 or when the map takes no changes).
+fn schedule_compaction(state: &Arc<AppState>) -> Option<tokio::task::JoinHandle<()>> {
+    let every = state.config.changes.compact_interval_s;
+    let localizer = state.localizer.get()?.clone();
+    if every == 0 || !localizer.map.writable() {
+        return None;
+    }
+    let state = state.clone();
+    Some(tokio::spawn(async move {
+        let period = Duration::from_secs(every);
+        let mut tick = tokio::time::interval_at(tokio::time::Instant::now() + period, period);
+        loop {
+            tick.tick().await;
+            let s = localizer.map.status();
+            if s.added > 0 || s.removed > 0 || s.log_records.unwrap_or(0) > 0 {
+                state.compact_in_background(&localizer, "schedule");
+            }
+        }
+    }))
 }
 
 /// Resolves at SIGTERM or SIGINT, naming it. The handlers are installed

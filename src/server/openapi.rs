@@ -4,6 +4,7 @@
 //! committed copy; a test checks it equals what the server serves.
 
 use super::errors::{ErrorBody, ErrorDetail};
+use super::images::{self, Compacted, ImageItem, ImagePage, Written};
 use super::localize::{self, ImageUpload};
 use super::status::{self, MapInfo, Status};
 use super::{page, thumbnails};
@@ -38,19 +39,43 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
         page::index,
         page::script,
         page::style,
+        images::list_images,
+        images::get_image,
+        images::put_image,
+        images::delete_image,
+        images::compact,
     ),
     components(schemas(
         Localization, Candidate, FeatureUse, RuleReport, StopInfo, ImageSize, Timings,
         MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, ImageUpload, Binary, RaceTrace,
         RacePoint, FullRace, CandidateMatches, SequenceAnswer, FilteredCandidate,
+        ImageItem, ImagePage, Written, Compacted, crate::live::Compaction,
+        crate::live::ChangesInfo,
     )),
+    modifiers(&BearerAuth),
     tags(
         (name = "localize", description = "Localize a query image against the loaded map."),
         (name = "operations", description = "Health, readiness, metrics and descriptions."),
         (name = "page", description = "The page for people at `/` and the map image thumbnails it shows."),
+        (name = "images", description = "The map's images: add, replace, remove, list; compaction. Writes need the bearer token."),
     )
 )]
 struct ApiDoc;
+
+/// The write endpoints' bearer token (`[auth] write_token`).
+struct BearerAuth;
+
+impl utoipa::Modify for BearerAuth {
+    fn modify(&self, doc: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::security::{Http, HttpAuthScheme, SecurityScheme};
+        doc.components
+            .get_or_insert_with(Default::default)
+            .add_security_scheme(
+                "bearer",
+                SecurityScheme::Http(Http::new(HttpAuthScheme::Bearer)),
+            );
+    }
+}
 
 /// Raw bytes in a request or answer body (an image, a protobuf message):
 /// `type: string, format: binary`.

@@ -6,6 +6,7 @@ use super::AppState;
 use super::errors::{ApiError, ErrorBody};
 use crate::features::ExtractConfig;
 use crate::index::MapMeta;
+use crate::index::MapRead;
 use crate::report::MapIdentity;
 use crate::vocabulary::VocabularyMeta;
 use axum::Json;
@@ -63,6 +64,9 @@ pub struct MapInfo {
     /// service's limits).
     #[schema(value_type = Object)]
     pub query_extract: ExtractConfig,
+    /// The changes since the map file was written: generation, images of
+    /// the file and now, added and removed, change log size, last compaction.
+    pub changes: crate::live::ChangesInfo,
 }
 
 /// The loaded map and vocabulary.
@@ -74,10 +78,12 @@ pub struct MapInfo {
 pub async fn map(State(state): State<Arc<AppState>>) -> Result<Json<MapInfo>, ApiError> {
     let l = state.localizer()?;
     let files = &state.config.files;
+    let snapshot = l.map.snapshot();
     Ok(Json(MapInfo {
-        identity: MapIdentity::of(&l.map),
+        identity: MapIdentity::of(&*snapshot),
         map_path: files.map.display().to_string(),
-        map: l.map.meta().clone(),
+        map: snapshot.meta().clone(),
+        changes: l.map.status(),
         vocabulary_path: files.vocabulary.display().to_string(),
         vocabulary: l.vocab.meta().clone(),
         query_extract: l.extract.clone(),

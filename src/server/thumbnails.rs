@@ -9,6 +9,7 @@ use super::AppState;
 use super::errors::{ApiError, ErrorBody};
 use super::openapi::Binary;
 use super::workers::PoolError;
+use crate::index::MapRead;
 use axum::body::Bytes;
 use axum::extract::{Path, RawQuery, State};
 use axum::http::{HeaderValue, header};
@@ -137,14 +138,15 @@ pub async fn thumbnail(
     let size = ThumbnailParams::size(query.as_deref())?;
     let localizer = state.localizer()?;
     let missing = || ApiError::not_found_because(format!("no map image `{id}`"));
+    let snapshot = localizer.map.snapshot();
     let id = parse_id(&id)
-        .filter(|&i| (i as usize) < localizer.map.meta().images)
+        .filter(|&i| (i as usize) < snapshot.meta().images && snapshot.contains(i))
         .ok_or_else(missing)?;
-    let key = (localizer.map.meta().name.clone(), id, size);
+    let key = (snapshot.meta().name.clone(), id, size);
     if let Some(jpeg) = state.thumbnails.get(&key) {
         return Ok(jpeg_response(jpeg));
     }
-    let name = localizer.map.image(id).name.to_owned();
+    let name = snapshot.image(id).name.to_owned();
     let file = resolve(&state.config.files.images, &name).ok_or_else(|| {
         ApiError::not_found_because(format!("map image {id} has no file in the image folder"))
     })?;

@@ -135,6 +135,12 @@ impl Store {
         })
     }
 
+    /// The checksum of the section table, which holds every section's
+    /// checksum: it identifies the file's content.
+    pub fn table_checksum(&self) -> u64 {
+        u64_at(&self.map, 16)
+    }
+
     pub fn path(&self) -> &Path {
         &self.path
     }

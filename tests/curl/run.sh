@@ -135,6 +135,8 @@ if start_server "$TMP/config.toml" "$TMP/server.log"; then
 else
   fail "server starts and becomes ready"; finish
 fi
+MAIN_BASE=$BASE
+MAIN_PID=$PID
 
 # req OUT ARGS...: curl, body to OUT, prints the status code.
 req() { local out=$1; shift; curl -s -o "$out" -w '%{http_code}' "$@"; }
@@ -301,6 +303,94 @@ none='.features.total == 0 and .candidates == [] and .stop.kind == "exhausted"'
 expect_answer "1×1 PNG has no features" "$FIX/one-pixel.png" "$none and .image.width == 1"
 expect_answer "uniform PNG has no features" "$FIX/uniform.png" "$none"
 expect_answer "uniform JPEG has no features" "$FIX/uniform.jpg" "$none"
+
+# --- the map's images: add, query, remove; the write token -------------------
+# A server on a copy of the map, with a write token. An image from another
+# dataset (gardens-point) is not in the map: its query does not answer it;
+# once added it is the top candidate, also after a compaction and a restart;
+# once removed it is gone again.
+check "writes are 403 writes_disabled without a configured token" test \
+  "$(req "$B" -X PUT -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/images/x")/$(jq -r .error.code "$B")" = "403/writes_disabled"
+mkdir -p "$TMP/live"
+cp "$TMP/map.bowmap" "$TMP/live/map.bowmap"
+TOKEN=curl-suite-write-token-0123456789
+sed "s|$TMP/map.bowmap|$TMP/live/map.bowmap|" "$TMP/config.toml" >"$TMP/live.toml"
+printf '[auth]\nwrite_token = "%s"\n' "$TOKEN" >>"$TMP/live.toml"
+NEW="$GARDENS/day_left/Image010.jpg"
+AUTH=(-H "Authorization: Bearer $TOKEN")
+top_name() { # top_name IMAGE: the name of the top candidate (or "none")
+  req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$1" "$LBASE/localize?rule=none&seed=1" >/dev/null
+  jq -r '.candidates[0].name // "none"' "$B"
+}
+if start_server "$TMP/live.toml" "$TMP/live.log"; then
+  LBASE=$BASE
+  LPID=$PID
+  check "a picture of another place is not answered with it before it is added" test "$(top_name "$NEW")" != "garden/10"
+  check "PUT without a token is 401 unauthorized, with WWW-Authenticate" test \
+    "$(curl -s -o "$B" -D "$TMP/h" -w '%{http_code}' -X PUT -H 'Content-Type: image/jpeg' --data-binary @"$NEW" "$LBASE/images/garden%2F10")/$(jq -r .error.code "$B")/$(grep -ci '^www-authenticate: bearer' "$TMP/h")" = "401/unauthorized/1"
+  check "PUT with another token is 403 forbidden" test \
+    "$(req "$B" -X PUT -H 'Authorization: Bearer not-the-token-at-all' -H 'Content-Type: image/jpeg' --data-binary @"$NEW" "$LBASE/images/garden%2F10")/$(jq -r .error.code "$B")" = "403/forbidden"
+  check "nothing was added by the refused writes" test "$(req "$B" "$LBASE/images/garden%2F10")/$(jq -r .error.code "$B")" = "404/image_not_found"
+  status=$(req "$B" -X PUT "${AUTH[@]}" -H 'Content-Type: image/jpeg' --data-binary @"$NEW" "$LBASE/images/garden%2F10?place=garden")
+  check "PUT /images/{id} adds it: 201 with its features and generation 1" test \
+    "$status/$(jq -r '.id, .generation, .replaced, (.features > 0)' "$B" | paste -sd/)" = "201/garden/10/1/false/true"
+  check "a query then finds it first" test "$(top_name "$NEW")" = "garden/10"
+  check "GET /images/{id} shows it with its place" test \
+    "$(req "$B" "$LBASE/images/garden%2F10")/$(jq -r '.id, .place, .index, (.added_at_ms > 0)' "$B" | paste -sd/)" = "200/garden/10/garden/40/true"
+  check "GET /images lists 41 images a page at a time" test \
+    "$(req "$B" "$LBASE/images?offset=40&limit=5")/$(jq -r '.total, (.images | length), .images[0].id' "$B" | paste -sd/)" = "200/41/1/garden/10"
+  check "GET /map counts the change" test \
+    "$(req "$B" "$LBASE/map")/$(jq -r '.changes.generation, .changes.added, .changes.images, .changes.log_records, .identity.images' "$B" | paste -sd/)" = "200/1/1/41/1/41"
+  status=$(req "$B" -X PUT "${AUTH[@]}" -F "image=@$NEW" "$LBASE/images/garden%2F10")
+  check "PUT again (multipart) replaces it: 200, replaced" test "$status/$(jq -r '.replaced, .generation' "$B" | paste -sd/)" = "200/true/2"
+  status=$(req "$B" -X PUT "${AUTH[@]}" -H 'Content-Type: image/png' --data-binary @"$ROOT/tests/fixtures/uniform.png" "$LBASE/images/flat")
+  check "an image without features is added and flagged" test \
+    "$status/$(jq -r '.features, (.warning | test("no features"))' "$B" | paste -sd/)" = "201/0/true"
+  for bad in "bad%20id" "%2Fabsolute"; do
+    check "PUT /images/$bad is 400 invalid_id" test \
+      "$(req "$B" -X PUT "${AUTH[@]}" -H 'Content-Type: image/jpeg' --data-binary @"$NEW" "$LBASE/images/$bad")/$(jq -r .error.code "$B")" = "400/invalid_id"
+  done
+  check "PUT with an unknown parameter is 400" test \
+    "$(req "$B" -X PUT "${AUTH[@]}" -H 'Content-Type: image/jpeg' --data-binary @"$NEW" "$LBASE/images/y?x=1")/$(jq -r .error.code "$B")" = "400/invalid_parameter"
+  check "PUT of bytes that are no image is 422 and adds nothing" test \
+    "$(req "$B" -X PUT "${AUTH[@]}" -H 'Content-Type: image/jpeg' --data-binary 'not an image' "$LBASE/images/junk")/$(jq -r .error.code "$B")/$(req "$B" "$LBASE/images/junk")" = "422/undecodable_image/404"
+  head -c 2100000 /dev/zero >"$TMP/big.bin"
+  check "PUT of a body over limits.body_bytes is 413" test \
+    "$(req "$B" -X PUT "${AUTH[@]}" -H 'Content-Type: image/jpeg' --data-binary @"$TMP/big.bin" "$LBASE/images/big")/$(jq -r .error.code "$B")" = "413/body_too_large"
+  check "DELETE of an unknown id is 404 image_not_found" test \
+    "$(req "$B" -X DELETE "${AUTH[@]}" "$LBASE/images/nothing-here")/$(jq -r .error.code "$B")" = "404/image_not_found"
+  check "DELETE without a token is 401" test "$(req "$B" -X DELETE "$LBASE/images/flat")" = 401
+  status=$(req "$B" -X POST "${AUTH[@]}" "$LBASE/map/compact")
+  got="$status/$(jq -r '.compacted, .compaction.images' "$B" | paste -sd/)"
+  got="$got/$(req "$TMP/m.json" "$LBASE/map")/$(jq -r '.changes.log_records, .changes.file_generation, .map.images' "$TMP/m.json" | paste -sd/)"
+  check "POST /map/compact folds the log: 200, 42 images, log empty ($got)" test "$got" = "200/true/42/200/0/3/42"
+  check "after the compaction the query still finds it" test "$(top_name "$NEW")" = "garden/10"
+  kill -KILL "$LPID"; wait "$LPID" 2>/dev/null
+  if start_server "$TMP/live.toml" "$TMP/live2.log"; then
+    LBASE=$BASE
+    LPID=$PID
+    check "after SIGKILL and a restart the image is still there" test "$(top_name "$NEW")" = "garden/10"
+    status=$(req "$B" -X DELETE "${AUTH[@]}" "$LBASE/images/garden%2F10")
+    check "DELETE /images/{id} is 200 with the next generation" test "$status/$(jq -r .generation "$B")" = "200/4"
+    check "a query then no longer finds it" test "$(top_name "$NEW")" != "garden/10"
+    check "GET /images/{id} of it is 404" test "$(req "$B" "$LBASE/images/garden%2F10")" = 404
+    kill -KILL "$LPID"; wait "$LPID" 2>/dev/null
+    if start_server "$TMP/live.toml" "$TMP/live3.log"; then
+      got="$(req "$B" "$BASE/images/garden%2F10")/$(req "$TMP/m.json" "$BASE/map")/$(jq -r .changes.generation "$TMP/m.json")"
+      check "the removal survives a restart (replayed from the change log; $got)" test "$got" = "404/200/4"
+      kill -TERM "$PID"; wait "$PID" 2>/dev/null
+    else
+      fail "the live server restarts"
+    fi
+  else
+    fail "the live server restarts after SIGKILL"
+  fi
+  check "no panic or error in the live server's logs" sh -c "! grep -hE 'panicked|ERROR' '$TMP'/live*.log"
+else
+  fail "a server with a write token starts"
+fi
+BASE=$MAIN_BASE
+PID=$MAIN_PID
 
 # --- metrics -----------------------------------------------------------------
 metric() { # metric NAME{LABELS}: its value in a fresh scrape (0 if absent)
