@@ -216,6 +216,31 @@ fn open(path: &Path) -> anyhow::Result<DescriptorSet> {
     Ok(DescriptorSet { store, meta })
 }
 
+/// A dataset's map descriptors (whole images) and query descriptors (tile by
+/// tile with `grid`), from the cache folder `cache` or extracted into it.
+pub fn dataset_descriptors(
+    cache: &Path,
+    dataset: &crate::dataset::Dataset,
+    config: &ExtractConfig,
+    grid: TileGrid,
+) -> anyhow::Result<(DescriptorSet, DescriptorSet)> {
+    let map = descriptors(
+        &cache.join("map.bowdesc"),
+        &dataset.map,
+        config,
+        TileGrid::WHOLE,
+        "extracting map",
+    )?;
+    let queries = descriptors(
+        &cache.join(format!("queries-{grid}.bowdesc")),
+        &dataset.queries,
+        config,
+        grid,
+        "extracting queries",
+    )?;
+    Ok((map, queries))
+}
+
 /// The descriptors of `images` extracted with `config`, tile by tile with
 /// `grid`: from `path` when it holds exactly those, else extracted (in
 /// parallel, timed) and written there.

@@ -445,22 +445,8 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         .as_ref()
         .map_or(config.extract.clone(), |v| v.meta().extract.clone());
 
-    let map_desc = cache::descriptors(
-        &config.cache.join("map.bowdesc"),
-        &dataset.map,
-        &extract,
-        TileGrid::WHOLE,
-        "extracting map",
-    )?;
-    let query_desc = cache::descriptors(
-        &config
-            .cache
-            .join(format!("queries-{}.bowdesc", config.tiles)),
-        &dataset.queries,
-        &extract,
-        config.tiles,
-        "extracting queries",
-    )?;
+    let (map_desc, query_desc) =
+        cache::dataset_descriptors(&config.cache, &dataset, &extract, config.tiles)?;
     let whole_desc = (config.tiles != TileGrid::WHOLE)
         .then(|| {
             cache::descriptors(

@@ -243,22 +243,8 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
         "give at least one vocabulary seed"
     );
     let dataset = Dataset::open(&config.dataset)?;
-    let map_desc = cache::descriptors(
-        &config.cache.join("map.bowdesc"),
-        &dataset.map,
-        &config.extract,
-        TileGrid::WHOLE,
-        "extracting map",
-    )?;
-    let query_desc = cache::descriptors(
-        &config
-            .cache
-            .join(format!("queries-{}.bowdesc", config.tiles)),
-        &dataset.queries,
-        &config.extract,
-        config.tiles,
-        "extracting queries",
-    )?;
+    let (map_desc, query_desc) =
+        cache::dataset_descriptors(&config.cache, &dataset, &config.extract, config.tiles)?;
     let inject_images = match &config.inject {
         Some(p) if config.injections > 0 => {
             image_list(p).with_context(|| format!("--inject {}", p.display()))?

@@ -85,22 +85,8 @@ pub fn default_settings() -> Vec<Setting> {
 /// evaluation's cache, made on first use).
 fn seed_maps(config: &ShardsConfig) -> anyhow::Result<Vec<(u64, MapIndex, Vec<Query>)>> {
     let dataset = Dataset::open(&config.dataset)?;
-    let map_desc = cache::descriptors(
-        &config.cache.join("map.bowdesc"),
-        &dataset.map,
-        &config.extract,
-        TileGrid::WHOLE,
-        "extracting map",
-    )?;
-    let query_desc = cache::descriptors(
-        &config
-            .cache
-            .join(format!("queries-{}.bowdesc", config.tiles)),
-        &dataset.queries,
-        &config.extract,
-        config.tiles,
-        "extracting queries",
-    )?;
+    let (map_desc, query_desc) =
+        cache::dataset_descriptors(&config.cache, &dataset, &config.extract, config.tiles)?;
     config
         .seeds
         .iter()
