@@ -9,10 +9,14 @@
 //! 1. **predict** ([`Filter::predict`]): the belief moves by the motion model
 //!    over the map's [`Topology`]: b'(j) = (1 − α)·Σᵢ b(i)·T(i, j) + α/M,
 //!    with T the [`Motion`] kernel for the frames elapsed and α its teleport
-//!    chance (M map images). The untracked images share one probability u;
-//!    the kernel moves a uniform belief to a uniform one, so only the
-//!    tracked images' excess b(i) − u is moved explicitly. The prediction
-//!    is the frame's prior;
+//!    chance (M map images). Along an open route (order topology) the part
+//!    of T(i, ·) past the route's ends leaves the map: that mass is spread
+//!    over every image, like the teleport, instead of piling up on the last
+//!    images (a camera driving on past the map's last image, e.g. around a
+//!    loop back to its first, is not held there). The untracked images
+//!    share one probability u; the kernel moves a uniform belief to a
+//!    (nearly) uniform one, so only the tracked images' excess b(i) − u is
+//!    moved explicitly. The prediction is the frame's prior;
 //! 2. **search** with that prior ([`crate::search::SearchOptions::prior`]):
 //!    the rule `posterior` may stop once the leader's posterior is ≥ 1 − ε;
 //! 3. **update** ([`Filter::update`]): the search's posterior
@@ -224,10 +228,15 @@ pub fn predict(
     let images = topology.images().max(1);
     let u = belief.floor();
     let mut moved: Vec<(u32, f64)> = Vec::new();
+    // mass that left the route past its ends: anywhere in the map
+    let mut off_route = 0.0;
     for &(i, p) in &belief.top {
+        let mut kept = 0.0;
         for (j, w) in model.motion.from(topology, i, steps) {
             moved.push((j, (p - u) * w));
+            kept += w;
         }
+        off_route += (p - u).max(0.0) * (1.0 - kept).max(0.0);
     }
     moved.sort_unstable_by_key(|e| e.0);
     let mut merged: Vec<(u32, f64)> = Vec::with_capacity(moved.len());
@@ -238,7 +247,7 @@ pub fn predict(
         }
     }
     let alpha = model.motion.teleport;
-    let jump = alpha / images as f64;
+    let jump = (alpha + (1.0 - alpha) * off_route) / images as f64;
     for e in &mut merged {
         e.1 = (1.0 - alpha) * (u + e.1).max(0.0) + jump;
     }
