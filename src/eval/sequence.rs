@@ -27,7 +27,7 @@ use super::{maps_of, quantize_queries, vocabularies};
 use crate::dataset::{Dataset, image_list};
 use crate::features::{ExtractConfig, TileGrid};
 use crate::index::MapIndex;
-use crate::search::{RuleSpec, SearchOptions};
+use crate::search::{Prior, RuleSpec, SearchOptions};
 use crate::sequence::{Filter, SequenceModel, Topology, TopologyKind};
 use anyhow::Context;
 use rayon::prelude::*;
@@ -197,9 +197,12 @@ fn pass(
             ..SearchOptions::default()
         };
         let prediction = mode.filter.then(|| filter.predict(model, &topology, None));
-        if let Some(pr) = &prediction {
-            options.prior = Some(Arc::new(pr.prior.clone()));
-        }
+        // a frame alone: a uniform prior at the model's κ, so the rule
+        // `posterior` weighs evidence as the filter does
+        options.prior = Some(Arc::new(match &prediction {
+            Some(pr) => pr.prior.clone(),
+            None => Prior::uniform(topology.images(), model.kappa).keeping(model.track),
+        }));
         let replay = query.search(map, &options, false);
         let ranked: Vec<u32> = match (&prediction, replay.outcome.posterior.clone()) {
             (Some(pr), Some(post)) => {
@@ -218,12 +221,6 @@ fn pass(
         p.tiles += replay.tiles as f64 / query.tiles.len().max(1) as f64;
         p.frames += 1;
         let right = |k: usize| ranked.iter().take(k).any(|j| truth[q].contains(j));
-        if std::env::var_os("SEQ_DEBUG").is_some() && seed == 1 {
-            let own: Vec<u32> = replay.outcome.candidates.iter().map(|c| c.id).take(3).collect();
-            let mut t: Vec<u32> = truth[q].iter().copied().collect();
-            t.sort();
-            eprintln!("DBG filter={} rule={} f={f} q={q} ok={} ranked={:?} own={:?} truth={:?} used={}/{} post={:?}", mode.filter, mode.rule, right(1), &ranked[..ranked.len().min(3)], own, t, replay.outcome.features_used, query.words.len(), replay.outcome.posterior.as_ref().map(|p| p.top.iter().take(3).map(|e| (e.0, (e.1*1000.0).round()/1000.0)).collect::<Vec<_>>()));
-        }
         if !truth[q].is_empty() {
             p.scored += 1;
             p.hits1 += right(1) as usize;

@@ -96,6 +96,23 @@ fn the_filter_follows_a_kidnapped_camera_within_a_few_frames() {
 }
 
 #[test]
+fn a_camera_driving_past_the_routes_end_is_found_at_its_start() {
+    // a loop: the camera drives 170..199, on past the map's last image, and
+    // round to 0..30 again (the order topology knows no loop closure)
+    let path: Vec<usize> = (170..200).chain(0..30).collect();
+    for seed in 0..5 {
+        let mut back = None;
+        run(&path, 0.9, seed, |f, leader| {
+            if f >= 30 && back.is_none() && (leader as i64 - path[f] as i64).abs() <= 1 {
+                back = Some(f - 30);
+            }
+        });
+        let back = back.expect("never found again");
+        assert!(back <= 1, "seed {seed}: found again after {back} frames");
+    }
+}
+
+#[test]
 fn out_of_order_frames_and_long_gaps_restart() {
     let model = SequenceModel::default();
     let topology = Topology::Order { images: 50 };

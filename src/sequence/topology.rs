@@ -109,7 +109,7 @@ pub struct Motion {
 impl Default for Motion {
     fn default() -> Self {
         Self {
-            sigma: 1.5,
+            sigma: 1.0,
             drift: 1.0,
             reach: 4.0,
             teleport: 0.05,
