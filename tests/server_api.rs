@@ -368,3 +368,141 @@ async fn the_protobuf_answer_carries_the_trace() {
     );
     assert!(t.matches[0].lines.len() >= 4);
 }
+
+/// The fields of each message of `proto/localize.proto`: message name →
+/// (field name → field type), read from the schema's text.
+fn proto_messages() -> std::collections::HashMap<String, std::collections::HashMap<String, String>>
+{
+    let text = std::fs::read_to_string(root().join("proto/localize.proto")).unwrap();
+    let mut messages = std::collections::HashMap::new();
+    let mut current: Option<(String, std::collections::HashMap<String, String>)> = None;
+    for line in text.lines().map(str::trim) {
+        if line.starts_with("//") || line.is_empty() {
+            continue;
+        }
+        if let Some(rest) = line.strip_prefix("message ") {
+            let name = rest.trim_end_matches('{').trim().to_owned();
+            current = Some((name, Default::default()));
+        } else if line == "}" {
+            if let Some((name, fields)) = current.take() {
+                messages.insert(name, fields);
+            }
+        } else if let Some((_, fields)) = &mut current
+            && let Some((decl, _number)) = line.split_once('=')
+        {
+            let words: Vec<&str> = decl
+                .split_whitespace()
+                .filter(|w| !matches!(*w, "optional" | "repeated"))
+                .collect();
+            // `TYPE name`, or `map<K, V> name`
+            if let (Some(kind), Some(name)) = (words.first(), words.last()) {
+                fields.insert((*name).to_owned(), (*kind).to_owned());
+            }
+        }
+    }
+    messages
+}
+
+/// The schema a JSON property refers to (directly, as array items, or as
+/// the non-null side of a nullable), if any.
+fn referenced(property: &serde_json::Value) -> Option<String> {
+    let r = property
+        .get("$ref")
+        .or_else(|| property.get("items").and_then(|i| i.get("$ref")))
+        .or_else(|| {
+            property
+                .get("oneOf")
+                .and_then(|o| o.as_array())
+                .and_then(|o| o.iter().find_map(|v| v.get("$ref")))
+        })?;
+    r.as_str()
+        .and_then(|s| s.rsplit('/').next())
+        .map(str::to_owned)
+}
+
+#[test]
+fn protobuf_schema_has_every_field_of_the_json_answer() {
+    let api: serde_json::Value = serde_json::from_str(&openapi::json()).unwrap();
+    let schemas = &api["components"]["schemas"];
+    let messages = proto_messages();
+    // (OpenAPI schema, proto message), walked from the answer down
+    let mut todo = vec![("Localization".to_owned(), "Localization".to_owned())];
+    let mut seen = std::collections::HashSet::new();
+    let mut missing = Vec::new();
+    while let Some((schema, message)) = todo.pop() {
+        if !seen.insert(schema.clone()) {
+            continue;
+        }
+        let fields = messages
+            .get(&message)
+            .unwrap_or_else(|| panic!("proto has no message {message} for schema {schema}"));
+        let properties = schemas[&schema]["properties"].as_object().unwrap();
+        for (name, property) in properties {
+            match fields.get(name) {
+                None => missing.push(format!("{message}.{name} (schema {schema})")),
+                Some(kind) => {
+                    if let Some(child) = referenced(property) {
+                        todo.push((child, kind.clone()));
+                    }
+                }
+            }
+        }
+    }
+    assert!(seen.contains("SequenceAnswer") && seen.contains("FilteredCandidate"));
+    assert!(
+        missing.is_empty(),
+        "fields of the JSON answer missing from proto/localize.proto: {missing:?}"
+    );
+}
+
+#[tokio::test]
+async fn protobuf_answer_carries_the_sequence_block() {
+    let state = state(true);
+    // the same two frames, as JSON in one sequence and as protobuf in another
+    for frame in 0..2 {
+        let (status, _, json) = send(
+            &state,
+            localize(
+                &format!("seed=3&sequence=j&frame={frame}"),
+                "application/json",
+            ),
+        )
+        .await;
+        assert_eq!(status, StatusCode::OK);
+        let json: serde_json::Value = serde_json::from_slice(&json).unwrap();
+        let (status, _, bytes) = send(
+            &state,
+            localize(
+                &format!("seed=3&sequence=p&frame={frame}"),
+                "application/x-protobuf",
+            ),
+        )
+        .await;
+        assert_eq!(status, StatusCode::OK);
+        let pb = pb::Localization::decode(bytes.as_slice()).unwrap();
+        let (s, j) = (pb.sequence.expect("a sequence block"), &json["sequence"]);
+        assert_eq!(s.name, "p");
+        assert_eq!(s.frame, j["frame"].as_u64().unwrap());
+        assert_eq!(s.frames, j["frames"].as_u64().unwrap());
+        assert_eq!(s.restart.as_deref(), j["restart"].as_str());
+        assert_eq!(s.restart.is_some(), frame == 0);
+        let filtered = j["candidates"].as_array().unwrap();
+        assert!(!s.candidates.is_empty());
+        assert_eq!(s.candidates.len(), filtered.len());
+        for (p, j) in s.candidates.iter().zip(filtered) {
+            assert_eq!(p.rank as u64, j["rank"].as_u64().unwrap());
+            assert_eq!(p.id as u64, j["id"].as_u64().unwrap());
+            assert_eq!(p.name, j["name"].as_str().unwrap());
+            assert!((p.probability - j["probability"].as_f64().unwrap()).abs() < 1e-12);
+        }
+        // the frame's own candidates carry their probability too
+        for (p, j) in pb
+            .candidates
+            .iter()
+            .zip(json["candidates"].as_array().unwrap())
+        {
+            let want = j["probability"].as_f64().expect("a probability");
+            assert!((p.probability.expect("a probability") - want).abs() < 1e-12);
+        }
+    }
+}

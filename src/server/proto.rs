@@ -3,7 +3,7 @@
 //! from `proto/localize.proto`, and the conversion from
 //! [`report::Localization`](crate::report::Localization).
 
-use crate::report::{Candidate, Localization, RacePoint, RaceTrace};
+use crate::report::{Candidate, Localization, RacePoint, RaceTrace, SequenceAnswer};
 use crate::search::{StopInfo, StopKind};
 
 /// Generated from `proto/localize.proto` (package `bowloc.v1`).
@@ -65,7 +65,27 @@ impl From<&Localization> for pb::Localization {
             }),
             verified: a.verified,
             trace: a.trace.as_ref().map(trace),
+            sequence: a.sequence.as_ref().map(sequence),
         }
+    }
+}
+
+fn sequence(s: &SequenceAnswer) -> pb::SequenceAnswer {
+    pb::SequenceAnswer {
+        name: s.name.clone(),
+        frame: s.frame,
+        frames: s.frames,
+        restart: s.restart.map(str::to_owned),
+        candidates: s
+            .candidates
+            .iter()
+            .map(|c| pb::FilteredCandidate {
+                rank: c.rank as u32,
+                id: c.id,
+                name: c.name.clone(),
+                probability: c.probability,
+            })
+            .collect(),
     }
 }
 
@@ -80,6 +100,7 @@ fn candidate(c: &Candidate) -> pb::Candidate {
         verified: c.verified,
         place: c.place.clone(),
         pose: c.pose.clone().unwrap_or_default(),
+        probability: c.probability,
     }
 }
 
