@@ -422,7 +422,7 @@ fn referenced(property: &serde_json::Value) -> Option<String> {
 
 #[test]
 fn protobuf_schema_has_every_field_of_the_json_answer() {
-    let api: serde_json::Value = serde_json::from_str(&openapi::json()).unwrap();
+    let api: serde_json::Value = serde_json::from_str(openapi::json()).unwrap();
     let schemas = &api["components"]["schemas"];
     let messages = proto_messages();
     // (OpenAPI schema, proto message), walked from the answer down
