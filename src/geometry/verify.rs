@@ -454,7 +454,13 @@ mod tests {
         let map = b.build("m", "v", None);
         let query: Vec<(u32, Keypoint)> = words.iter().map(|&w| (w, kp(w))).collect();
         let fit = AllInliers(VerifyParams::default().fit());
-        let out = rerank(&map, &[(1, 0.9), (0, 0.5)], &query, &fit, &VerifyParams::default());
+        let out = rerank(
+            &map,
+            &[(1, 0.9), (0, 0.5)],
+            &query,
+            &fit,
+            &VerifyParams::default(),
+        );
         assert_eq!(out[0].id, 0, "the image with inliers is ranked first");
         let v = out[0].verification.unwrap();
         assert_eq!(v.inliers, 20);
