@@ -7,9 +7,7 @@ use crate::features::fit::OpenCvFit;
 use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
 use crate::geometry::Keypoint;
 use crate::geometry::packed::PackedFeature;
-use crate::geometry::verify::{
-    LeaderVerifier, VerifyParams, inlier_matches, rerank, with_keypoints,
-};
+use crate::geometry::verify::{LeaderVerifier, VerifyParams, rerank, with_keypoints};
 use crate::index::{ImageWords, MapBuilder, MapIndex, MapRead, Places};
 use crate::live::{LiveMap, Opened};
 use crate::quantize::{Quantizer, QuantizerKind};
@@ -458,17 +456,15 @@ impl Localizer {
             options.min_score,
             started.elapsed(),
         );
-        // a traced answer shows each candidate's inliers (not timed: the
-        // fits are repeated only to draw them)
+        // a traced answer shows each candidate's inliers, those of the fit
+        // that counted them
         if let Some(trace) = &mut answer.trace {
             trace.matches = answer
                 .candidates
                 .iter()
                 .filter(|c| c.inliers.unwrap_or(0) > 0)
-                .map(|c| {
-                    let inliers = inlier_matches(map, c.id, query, &self.fit, &self.verify);
-                    CandidateMatches::new(c.id, &inliers.query, &inliers.map)
-                })
+                .filter_map(|c| reranked.iter().find(|r| r.id == c.id))
+                .map(|r| CandidateMatches::new(r.id, &r.inlier_pairs.query, &r.inlier_pairs.map))
                 .collect();
         }
         answer

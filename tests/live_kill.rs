@@ -60,10 +60,12 @@ fn free_port() -> u16 {
         .port()
 }
 
+// the caller owns the returned child and kills and waits for it
+#[allow(clippy::zombie_processes)]
 fn start(config: &Path) -> (Child, SocketAddr) {
     let port = free_port();
     let addr: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
-    let child = Command::new(BIN)
+    let mut child = Command::new(BIN)
         .args(["--log", "warn", "serve", "--config"])
         .arg(config)
         .args(["--listen", &addr.to_string()])
@@ -77,10 +79,11 @@ fn start(config: &Path) -> (Child, SocketAddr) {
         if let Ok((200, _)) = request(addr, "GET", "/readyz", None) {
             return (child, addr);
         }
-        assert!(
-            started.elapsed() < Duration::from_secs(60),
-            "the server did not become ready"
-        );
+        if started.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the server did not become ready");
+        }
         std::thread::sleep(Duration::from_millis(50));
     }
 }

@@ -145,6 +145,10 @@ pub fn run(config: &ShardsConfig) -> anyhow::Result<Vec<ShardRow>> {
     Ok(rows)
 }
 
+/// One sharded search: (identical to the single map's answer, fraction of
+/// the features used, rounds, messages, bytes, messages per feature).
+type SearchStats = (bool, f64, usize, usize, usize, usize);
+
 /// Every query and run of one setting, on one machine and on the shards.
 fn compare(
     map: &MapIndex,
@@ -158,8 +162,7 @@ fn compare(
     let jobs: Vec<(u32, usize)> = (0..config.runs)
         .flat_map(|run| (0..queries.len()).map(move |q| (run, q)))
         .collect();
-    // (identical, fraction, rounds, messages, bytes, per-feature messages)
-    let per_search: Vec<(bool, f64, usize, usize, usize, usize)> = jobs
+    let per_search: Vec<SearchStats> = jobs
         .par_iter()
         .map(|&(run, q)| {
             let query = &queries[q];
@@ -187,9 +190,7 @@ fn compare(
         })
         .collect();
     let n = per_search.len().max(1) as f64;
-    let mean = |f: &dyn Fn(&(bool, f64, usize, usize, usize, usize)) -> f64| {
-        per_search.iter().map(f).sum::<f64>() / n
-    };
+    let mean = |f: &dyn Fn(&SearchStats) -> f64| per_search.iter().map(f).sum::<f64>() / n;
     ShardRow {
         seed,
         setting: setting.label(),

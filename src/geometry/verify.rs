@@ -276,24 +276,6 @@ pub fn fit_inliers(
     (verification, Correspondences { query: q, map: m })
 }
 
-/// The inliers of map image `image` against the query's features, as
-/// matched positions in each image's extraction frame (what a page draws
-/// as match lines).
-pub fn inlier_matches(
-    map: &dyn MapRead,
-    image: u32,
-    query: &[(u32, Keypoint)],
-    fit: &dyn ModelFit,
-    params: &VerifyParams,
-) -> Correspondences {
-    let c = tentative(
-        &QueryFeatures::new(query),
-        map.geometry(image),
-        params.max_word_pairs,
-    );
-    fit_inliers(&c, fit, params.min_inliers).1
-}
-
 /// Verify one map image's stored features against the query's.
 pub fn verify_features(
     map_features: &[PackedFeature],
@@ -350,13 +332,15 @@ pub fn with_keypoints(voted: &[(u32, u32)], keypoints: &[Keypoint]) -> Vec<(u32,
         .collect()
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Reranked {
     pub id: u32,
     /// The vote score it had.
     pub votes: f32,
     /// `None` beyond the top k (not verified).
     pub verification: Option<Verification>,
+    /// The pairs the fit took as inliers (empty unless it verified some).
+    pub inlier_pairs: Correspondences,
 }
 
 impl Reranked {
@@ -381,10 +365,20 @@ pub fn rerank(
     let mut out: Vec<Reranked> = candidates
         .iter()
         .enumerate()
-        .map(|(i, &(id, votes))| Reranked {
-            id,
-            votes,
-            verification: (i < k).then(|| verify_features(map.geometry(id), &query, fit, params)),
+        .map(|(i, &(id, votes))| {
+            let (verification, inlier_pairs) = if i < k {
+                let c = tentative(&query, map.geometry(id), params.max_word_pairs);
+                let (v, pairs) = fit_inliers(&c, fit, params.min_inliers);
+                (Some(v), pairs)
+            } else {
+                (None, Correspondences::default())
+            };
+            Reranked {
+                id,
+                votes,
+                verification,
+                inlier_pairs,
+            }
         })
         .collect();
     // stable: equal inliers keep vote order
@@ -438,6 +432,41 @@ mod tests {
         let v = count_inliers(&pairs(&grid), &fit, 16);
         assert_eq!((v.inliers, v.verified), (16, true));
         assert!(!count_inliers(&pairs(&grid), &fit, 17).verified);
+    }
+
+    #[test]
+    fn reranked_candidates_carry_the_inliers_their_fit_counted() {
+        use crate::index::{ImageWords, MapBuilder};
+        // map image 0 shares 20 spread words with the query, image 1 none
+        let kp = |i: u32| Keypoint {
+            x: (i % 5) as f32 * 17.0 + 3.0,
+            y: (i / 5) as f32 * 13.0 + 5.0,
+            size: 4.0,
+            angle: 0.0,
+            response: 1.0,
+        };
+        let words: Vec<u32> = (0..20).collect();
+        let kps: Vec<Keypoint> = words.iter().map(|&w| kp(w)).collect();
+        let other: Vec<u32> = (20..40).collect();
+        let mut b = MapBuilder::new(40);
+        b.add(ImageWords::with_geometry("a", &words, &kps));
+        b.add(ImageWords::with_geometry("b", &other, &kps));
+        let map = b.build("m", "v", None);
+        let query: Vec<(u32, Keypoint)> = words.iter().map(|&w| (w, kp(w))).collect();
+        let fit = AllInliers(VerifyParams::default().fit());
+        let out = rerank(
+            &map,
+            &[(1, 0.9), (0, 0.5)],
+            &query,
+            &fit,
+            &VerifyParams::default(),
+        );
+        assert_eq!(out[0].id, 0, "the image with inliers is ranked first");
+        let v = out[0].verification.unwrap();
+        assert_eq!(v.inliers, 20);
+        assert_eq!(out[0].inlier_pairs.len(), v.inliers);
+        assert_eq!(out[1].verification.unwrap().inliers, 0);
+        assert!(out[1].inlier_pairs.is_empty());
     }
 
     #[test]

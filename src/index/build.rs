@@ -170,6 +170,7 @@ impl MapBuilder {
             features: self.images.iter().map(|i| i.features as u64).sum(),
             images_without_features: self.images.iter().filter(|i| i.features == 0).count(),
             generation: 0,
+            compacted_at_ms: None,
         };
         let arrays = MapArrays {
             idf,

@@ -31,6 +31,10 @@ pub struct MapMeta {
     /// (`crate::live`).
     #[serde(default)]
     pub generation: u64,
+    /// When a compaction wrote this file, in milliseconds since the Unix
+    /// epoch (`None` for a map built from images).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compacted_at_ms: Option<u64>,
 }
 
 pub(super) fn save(map: &MapIndex, path: &Path) -> Result<(), StoreError> {

@@ -132,6 +132,13 @@ impl MapIndex {
         self
     }
 
+    /// The same map, recorded as written by a compaction at `at_ms`
+    /// (milliseconds since the Unix epoch).
+    pub fn compacted_at(mut self, at_ms: u64) -> Self {
+        self.meta.compacted_at_ms = Some(at_ms);
+        self
+    }
+
     /// What identifies this map's content: the file's section-table checksum
     /// (which covers every section's checksum), or for a map held in memory
     /// a hash of its metadata.

@@ -51,14 +51,28 @@ pub enum WriteError {
 /// The last compaction.
 #[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub struct Compaction {
-    /// When it finished, in milliseconds since the Unix epoch.
+    /// When it wrote the map file, in milliseconds since the Unix epoch.
     pub at_ms: u64,
-    /// How long it took (fold, write, reopen), in seconds.
-    pub seconds: f64,
+    /// How long it took (fold, write, reopen), in seconds; `null` when it
+    /// ran before the server last started (the map file records only when).
+    pub seconds: Option<f64>,
     /// The generation it folded.
     pub generation: u64,
     /// Images in the map it wrote.
     pub images: usize,
+}
+
+impl Compaction {
+    /// The compaction that wrote `map`'s file, as far as the file records it.
+    fn of_file(map: &MapIndex) -> Option<Self> {
+        let meta = map.meta();
+        meta.compacted_at_ms.map(|at_ms| Self {
+            at_ms,
+            seconds: None,
+            generation: meta.generation,
+            images: map.images(),
+        })
+    }
 }
 
 /// The state of the changes, as `/map` reports it.
@@ -81,7 +95,8 @@ pub struct ChangesInfo {
     /// Records and bytes in the change log (`null` without a log).
     pub log_records: Option<usize>,
     pub log_bytes: Option<u64>,
-    /// The last compaction of this process, if any.
+    /// The last compaction, if the map file was written by one (also one
+    /// that ran before a restart).
     pub last_compaction: Option<Compaction>,
 }
 
@@ -145,6 +160,7 @@ impl LiveMap {
         };
         let fingerprint = base.fingerprint();
         let file_generation = base.meta().generation;
+        let last_compaction = Compaction::of_file(&base);
         let mut snapshot = Snapshot::new(Arc::new(base));
         let log_path = log::path_for(path);
         let mut opened = Opened::default();
@@ -203,7 +219,7 @@ impl LiveMap {
                 broken: None,
             })),
             max_images,
-            last_compaction: Mutex::new(None),
+            last_compaction: Mutex::new(last_compaction),
         };
         Ok((live, opened))
     }
@@ -259,7 +275,8 @@ impl LiveMap {
             return Ok(None);
         }
         let started = Instant::now();
-        let folded = compact::fold(&snapshot);
+        let at_ms = now_ms();
+        let folded = compact::fold(&snapshot).compacted_at(at_ms);
         folded
             .save(&w.map_path)
             .map_err(|e| WriteError::Log(format!("writing the compacted map: {e}")))?;
@@ -288,8 +305,8 @@ impl LiveMap {
         let images = map.images();
         self.current.store(Arc::new(Snapshot::new(Arc::new(map))));
         let done = Compaction {
-            at_ms: now_ms(),
-            seconds: started.elapsed().as_secs_f64(),
+            at_ms,
+            seconds: Some(started.elapsed().as_secs_f64()),
             generation: snapshot.generation(),
             images,
         };

@@ -231,6 +231,10 @@ fn changes_survive_a_restart_a_torn_tail_and_a_compaction() {
     let path = saved(dir.path(), &s.file);
     let (live, opened) = LiveMap::open(&path, None, true, usize::MAX).unwrap();
     assert_eq!(opened.replayed, 0);
+    assert!(
+        live.status().last_compaction.is_none(),
+        "a built map was never compacted"
+    );
     let held = live.snapshot();
     for change in &s.changes {
         live.apply(change.clone()).unwrap();
@@ -266,9 +270,19 @@ fn changes_survive_a_restart_a_torn_tail_and_a_compaction() {
     assert_eq!(live.status().log_records, Some(0));
     assert_eq!(names(&live), want);
     assert!(live.compact().unwrap().is_none(), "nothing left to fold");
+    assert!(done.seconds.is_some());
     live.apply(Change::Remove { name: "f0".into() }).unwrap();
     drop(live);
     let (live, opened) = LiveMap::open(&path, None, true, usize::MAX).unwrap();
+    // the map file remembers its compaction across the restart
+    let last = live
+        .status()
+        .last_compaction
+        .expect("compaction after a restart");
+    assert_eq!(last.at_ms, done.at_ms);
+    assert_eq!(last.generation, done.generation);
+    assert_eq!(last.images, done.images);
+    assert_eq!(last.seconds, None);
     assert_eq!(opened.replayed, 1);
     assert_eq!(live.status().generation, s.changes.len() as u64 + 1);
     assert_eq!(live.status().file_generation, s.changes.len() as u64);

@@ -69,7 +69,7 @@ impl Trace {
 
     /// Whether the point after `features` votes is sampled.
     pub fn wants(&self, features: usize) -> bool {
-        features > 0 && features as u64 % self.every as u64 == 0
+        features > 0 && (features as u64).is_multiple_of(self.every as u64)
     }
 
     /// Record a sampled point (one [`wants`](Self::wants)).
@@ -78,7 +78,7 @@ impl Trace {
             self.every *= 2;
             let every = self.every;
             self.points.retain(|p| p.features % every == 0);
-            if point.features % every != 0 {
+            if !point.features.is_multiple_of(every) {
                 return;
             }
         }

@@ -8,7 +8,7 @@
 
 use super::AppState;
 use super::errors::{ApiError, ErrorBody};
-use super::localize::{ImageUpload, pool_error, read_image};
+use super::localize::{ImageUpload, receive_image};
 use super::openapi::Binary;
 use crate::index::MapRead;
 use crate::live::{Change, Compaction, NewImage, Snapshot, WriteError, now_ms};
@@ -355,18 +355,13 @@ pub async fn put_image(
         &localizer.map.snapshot().meta().pose_fields,
     )?;
     let _claim = state.writing.claim(&id)?;
-    let image = tokio::time::timeout_at(deadline.into(), read_image(&state, request))
-        .await
-        .map_err(|_| ApiError::request_timeout())??;
-    crate::features::probe(&image, localizer.limits)?;
+    let image = receive_image(&state, request, deadline, localizer.limits).await?;
     let extractor = localizer.clone();
     let features = state
-        .pool
-        .run(Some(tokio::time::Instant::from_std(deadline)), move || {
-            extractor.map_features(&image)
+        .on_worker(deadline, "extraction", move || {
+            Ok(extractor.map_features(&image)?)
         })
-        .await
-        .map_err(|e| pool_error(&state, e, "extraction"))??;
+        .await?;
     let n = features.len();
     let change = Change::Add(NewImage {
         name: id.clone(),

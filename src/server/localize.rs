@@ -6,7 +6,6 @@ use super::AppState;
 use super::errors::{ApiError, ErrorBody};
 use super::openapi::Binary;
 use super::proto;
-use super::workers::PoolError;
 use crate::features::TileGrid;
 use crate::index::MapRead;
 use crate::pipeline::Tracing;
@@ -416,8 +415,24 @@ fn body_error(
     }
 }
 
+/// The request's image, arrived before `deadline` (a body still arriving
+/// then is not waited for) and probed — format and pixel count from its
+/// header — before it takes a worker.
+pub(super) async fn receive_image(
+    state: &AppState,
+    request: Request,
+    deadline: Instant,
+    limits: crate::features::DecodeLimits,
+) -> Result<Bytes, ApiError> {
+    let image = tokio::time::timeout_at(deadline.into(), read_image(state, request))
+        .await
+        .map_err(|_| ApiError::request_timeout())??;
+    crate::features::probe(&image, limits)?;
+    Ok(image)
+}
+
 /// The image bytes of the request.
-pub(super) async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiError> {
+async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiError> {
     let limit = state.config.limits.body_bytes;
     let kind = body_kind(request.headers())?;
     let declared = request
@@ -571,12 +586,7 @@ pub async fn localize(
             model.kappa,
         )));
     }
-    // A body still arriving at the deadline is not waited for.
-    let image = tokio::time::timeout_at(deadline.into(), read_image(&state, request))
-        .await
-        .map_err(|_| ApiError::request_timeout())??;
-    // Format and pixel count from the header, before the image takes a worker.
-    crate::features::probe(&image, localizer.limits)?;
+    let image = receive_image(&state, request, deadline, localizer.limits).await?;
     // A frame of a sequence holds its sequence's lock from prediction to
     // update, so frames of one sequence apply one at a time.
     let mut held = None;
@@ -604,15 +614,13 @@ pub async fn localize(
     let top_n = options.top_n;
     let worker_localizer = localizer.clone();
     let answer = state
-        .pool
-        .run(Some(tokio::time::Instant::from_std(deadline)), move || {
+        .on_worker(deadline, "localization", move || {
             if Instant::now() >= deadline {
                 return Err(ApiError::deadline_exceeded()); // no work for a lost cause
             }
             Ok(worker_localizer.localize_traced(&image, &options, tiles, verify, tracing)?)
         })
-        .await
-        .map_err(|e| pool_error(&state, e, "localization"))??;
+        .await?;
     if answer.stop.kind == crate::search::StopKind::Deadline && answer.features.used == 0 {
         return Err(ApiError::deadline_exceeded()); // the deadline passed before any vote
     }
@@ -643,19 +651,6 @@ pub async fn localize(
     let mut response = encode(&answer, format);
     response.extensions_mut().insert(summary);
     Ok(response)
-}
-
-/// The answer when the worker pool did not run a job (`what`: its name in
-/// the log).
-pub(super) fn pool_error(state: &AppState, e: PoolError, what: &str) -> ApiError {
-    match e {
-        PoolError::QueueFull => ApiError::overloaded(state.pool.queue_capacity()),
-        PoolError::TimedOut => ApiError::queue_timeout(),
-        PoolError::Panicked(m) => {
-            tracing::error!("{what} panicked: {m}");
-            ApiError::internal(format!("the {what} failed unexpectedly"))
-        }
-    }
 }
 
 fn encode(answer: &Localization, format: Format) -> Response {

@@ -158,6 +158,29 @@ impl AppState {
         })
     }
 
+    /// Run `job` on the worker pool, started before `deadline`. A full queue
+    /// answers 503 `overloaded`, no worker free in time 503 `queue_timeout`,
+    /// and a job that panics 500, logged under `what` (its name).
+    pub async fn on_worker<T: Send + 'static>(
+        &self,
+        deadline: std::time::Instant,
+        what: &'static str,
+        job: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
+    ) -> Result<T, ApiError> {
+        use workers::PoolError;
+        self.pool
+            .run(Some(tokio::time::Instant::from_std(deadline)), job)
+            .await
+            .map_err(|e| match e {
+                PoolError::QueueFull => ApiError::overloaded(self.pool.queue_capacity()),
+                PoolError::TimedOut => ApiError::queue_timeout(),
+                PoolError::Panicked(m) => {
+                    tracing::error!("{what} panicked: {m}");
+                    ApiError::internal(format!("the {what} failed unexpectedly"))
+                }
+            })?
+    }
+
     /// The map's topology for sequences, or 400 saying why there is none.
     pub fn topology(&self) -> Result<&crate::sequence::Topology, ApiError> {
         match self.topology.get() {

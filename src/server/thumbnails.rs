@@ -8,7 +8,6 @@
 use super::AppState;
 use super::errors::{ApiError, ErrorBody};
 use super::openapi::Binary;
-use super::workers::PoolError;
 use crate::index::MapRead;
 use axum::body::Bytes;
 use axum::extract::{Path, RawQuery, State};
@@ -152,23 +151,14 @@ pub async fn thumbnail(
     })?;
     let limits = localizer.limits;
     let jpeg = state
-        .pool
-        .run(Some(tokio::time::Instant::from_std(deadline)), move || {
+        .on_worker(deadline, "thumbnail", move || {
             let bytes = std::fs::read(&file).map_err(|_| {
                 ApiError::not_found_because(format!("map image {id} cannot be read"))
             })?;
             crate::features::thumbnail(&bytes, size, limits)
                 .map_err(|e| ApiError::undecodable(format!("map image {id}: {e}")))
         })
-        .await
-        .map_err(|e| match e {
-            PoolError::QueueFull => ApiError::overloaded(state.pool.queue_capacity()),
-            PoolError::TimedOut => ApiError::queue_timeout(),
-            PoolError::Panicked(m) => {
-                tracing::error!("thumbnail panicked: {m}");
-                ApiError::internal("the thumbnail failed unexpectedly")
-            }
-        })??;
+        .await?;
     let jpeg = Bytes::from(jpeg);
     state.thumbnails.put(key, jpeg.clone());
     Ok(jpeg_response(jpeg))

@@ -361,6 +361,7 @@ if start_server "$TMP/live.toml" "$TMP/live.log"; then
     "$(req "$B" -X DELETE "${AUTH[@]}" "$LBASE/images/nothing-here")/$(jq -r .error.code "$B")" = "404/image_not_found"
   check "DELETE without a token is 401" test "$(req "$B" -X DELETE "$LBASE/images/flat")" = 401
   status=$(req "$B" -X POST "${AUTH[@]}" "$LBASE/map/compact")
+  COMPACTED_AT=$(jq -r .compaction.at_ms "$B")
   got="$status/$(jq -r '.compacted, .compaction.images' "$B" | paste -sd/)"
   got="$got/$(req "$TMP/m.json" "$LBASE/map")/$(jq -r '.changes.log_records, .changes.file_generation, .map.images' "$TMP/m.json" | paste -sd/)"
   check "POST /map/compact folds the log: 200, 42 images, log empty ($got)" test "$got" = "200/true/42/200/0/3/42"
@@ -370,6 +371,8 @@ if start_server "$TMP/live.toml" "$TMP/live.log"; then
     LBASE=$BASE
     LPID=$PID
     check "after SIGKILL and a restart the image is still there" test "$(top_name "$NEW")" = "garden/10"
+    got="$(req "$TMP/m.json" "$LBASE/map")/$(jq -r '.changes.last_compaction | .at_ms, .images, .seconds' "$TMP/m.json" | paste -sd/)"
+    check "/map reports the last compaction after a restart ($got)" test "$got" = "200/$COMPACTED_AT/42/null"
     status=$(req "$B" -X DELETE "${AUTH[@]}" "$LBASE/images/garden%2F10")
     check "DELETE /images/{id} is 200 with the next generation" test "$status/$(jq -r .generation "$B")" = "200/4"
     check "a query then no longer finds it" test "$(top_name "$NEW")" != "garden/10"
