@@ -460,25 +460,18 @@ async fn protobuf_answer_carries_the_sequence_block() {
     let state = state(true);
     // the same two frames, as JSON in one sequence and as protobuf in another
     for frame in 0..2 {
-        let (status, _, json) = send(
-            &state,
-            localize(
-                &format!("seed=3&sequence=j&frame={frame}"),
-                "application/json",
-            ),
-        )
-        .await;
-        assert_eq!(status, StatusCode::OK);
-        let json: serde_json::Value = serde_json::from_slice(&json).unwrap();
-        let (status, _, bytes) = send(
-            &state,
-            localize(
-                &format!("seed=3&sequence=p&frame={frame}"),
-                "application/x-protobuf",
-            ),
-        )
-        .await;
-        assert_eq!(status, StatusCode::OK);
+        let frame_of = |name: &str, accept: &'static str| {
+            let request = localize(&format!("seed=3&sequence={name}&frame={frame}"), accept);
+            let state = state.clone();
+            async move {
+                let (status, _, body) = send(&state, request).await;
+                assert_eq!(status, StatusCode::OK);
+                body
+            }
+        };
+        let json: serde_json::Value =
+            serde_json::from_slice(&frame_of("j", "application/json").await).unwrap();
+        let bytes = frame_of("p", "application/x-protobuf").await;
         let pb = pb::Localization::decode(bytes.as_slice()).unwrap();
         let (s, j) = (pb.sequence.expect("a sequence block"), &json["sequence"]);
         assert_eq!(s.name, "p");

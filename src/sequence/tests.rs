@@ -76,6 +76,22 @@ fn the_filter_recovers_a_path_from_noisy_evidence() {
     }
 }
 
+/// Frames after `from` until the filter's leader is within one image of the
+/// camera on `path` (reliable frames), for each of 5 seeds.
+fn frames_to_find(path: &[usize], from: usize) -> Vec<usize> {
+    (0..5)
+        .map(|seed| {
+            let mut back = None;
+            run(path, 0.9, seed, |f, leader| {
+                if f >= from && back.is_none() && (leader as i64 - path[f] as i64).abs() <= 1 {
+                    back = Some(f - from);
+                }
+            });
+            back.unwrap_or_else(|| panic!("seed {seed}: never found again"))
+        })
+        .collect()
+}
+
 #[test]
 fn the_filter_follows_a_kidnapped_camera_within_a_few_frames() {
     // the camera walks 10..90, then is carried to 150 and walks on
@@ -83,16 +99,11 @@ fn the_filter_follows_a_kidnapped_camera_within_a_few_frames() {
         .map(|f| 10 + f)
         .chain((0..30).map(|f| 150 + f))
         .collect();
-    for seed in 0..5 {
-        let mut back = None;
-        run(&path, 0.9, seed, |f, leader| {
-            if f >= 80 && back.is_none() && (leader as i64 - path[f] as i64).abs() <= 1 {
-                back = Some(f - 80);
-            }
-        });
-        let back = back.expect("never recovered");
-        assert!(back <= 4, "seed {seed}: recovered after {back} frames");
-    }
+    let back = frames_to_find(&path, 80);
+    assert!(
+        back.iter().all(|&b| b <= 4),
+        "recovered after {back:?} frames"
+    );
 }
 
 #[test]
@@ -100,16 +111,11 @@ fn a_camera_driving_past_the_routes_end_is_found_at_its_start() {
     // a loop: the camera drives 170..199, on past the map's last image, and
     // round to 0..30 again (the order topology knows no loop closure)
     let path: Vec<usize> = (170..200).chain(0..30).collect();
-    for seed in 0..5 {
-        let mut back = None;
-        run(&path, 0.9, seed, |f, leader| {
-            if f >= 30 && back.is_none() && (leader as i64 - path[f] as i64).abs() <= 1 {
-                back = Some(f - 30);
-            }
-        });
-        let back = back.expect("never found again");
-        assert!(back <= 1, "seed {seed}: found again after {back} frames");
-    }
+    let back = frames_to_find(&path, 30);
+    assert!(
+        back.iter().all(|&b| b <= 1),
+        "found again after {back:?} frames"
+    );
 }
 
 #[test]
