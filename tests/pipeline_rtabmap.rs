@@ -6,9 +6,8 @@ mod common;
 
 use bowloc::dataset::Dataset;
 use bowloc::features::{DecodeLimits, ExtractConfig};
-use bowloc::pipeline::{Localizer, extract_all, index_descriptors, stack, train_vocabulary};
+use bowloc::pipeline::Localizer;
 use bowloc::search::{RuleSpec, SearchOptions};
-use bowloc::vocabulary::kmeans::KmeansConfig;
 use std::process::Command;
 
 fn bowloc() -> Command {
@@ -22,22 +21,9 @@ const RECALL_AT_5_FLOOR: f64 = 0.90;
 
 #[test]
 fn rtabmap_loop_recall_at_5_with_full_bow() {
-    let data = Dataset::open(&common::dataset("rtabmap-loop")).unwrap();
-    let extract = ExtractConfig::default();
-    let map_desc = extract_all(&data.map, &extract, DecodeLimits::default(), false, "map").unwrap();
-    let parts: Vec<_> = map_desc.iter().flatten().collect();
-    let vocab = train_vocabulary(
-        stack(&parts).view(),
-        &extract,
-        &KmeansConfig {
-            k: 1000,
-            seed: 1,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let names: Vec<String> = data.map.iter().map(|i| i.name.clone()).collect();
-    let map = index_descriptors(&vocab, &names, &map_desc, None, "rtabmap-loop");
+    let common::RealMap {
+        data, vocab, map, ..
+    } = common::real_map("rtabmap-loop", 1000);
     assert_eq!(map.images(), 40);
 
     let dir = tempfile::tempdir().unwrap();

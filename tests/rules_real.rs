@@ -8,11 +8,8 @@
 
 mod common;
 
-use bowloc::dataset::Dataset;
-use bowloc::features::{DecodeLimits, ExtractConfig};
-use bowloc::pipeline::{extract_all, index_descriptors, stack, train_vocabulary, words_per_image};
+use bowloc::pipeline::words_per_image;
 use bowloc::search::{RuleSpec, SearchOptions, search_words};
-use bowloc::vocabulary::kmeans::KmeansConfig;
 
 struct Prepared {
     name: String,
@@ -21,20 +18,12 @@ struct Prepared {
 }
 
 fn prepare(dataset: &str, words: usize) -> Prepared {
-    let data = Dataset::open(&common::dataset(dataset)).unwrap();
-    let extract = ExtractConfig::default();
-    let limits = DecodeLimits::default();
-    let map_desc = extract_all(&data.map, &extract, limits, false, "map").unwrap();
-    let parts: Vec<_> = map_desc.iter().flatten().collect();
-    let config = KmeansConfig {
-        k: words,
-        seed: 1,
-        ..Default::default()
-    };
-    let vocab = train_vocabulary(stack(&parts).view(), &extract, &config).unwrap();
-    let names: Vec<String> = data.map.iter().map(|i| i.name.clone()).collect();
-    let map = index_descriptors(&vocab, &names, &map_desc, None, dataset);
-    let query_desc = extract_all(&data.queries, &extract, limits, false, "queries").unwrap();
+    let common::RealMap {
+        vocab,
+        map,
+        queries: query_desc,
+        ..
+    } = common::real_map(dataset, words);
     let queries = words_per_image(&vocab, &query_desc);
     Prepared {
         name: dataset.to_owned(),

@@ -4,16 +4,11 @@
 
 mod common;
 
-use bowloc::dataset::Dataset;
 use bowloc::features::fit::OpenCvFit;
-use bowloc::features::{DecodeLimits, ExtractConfig};
 use bowloc::geometry::Keypoint;
 use bowloc::geometry::verify::{VerifyParams, rerank};
-use bowloc::pipeline::{
-    Localizer, extract_all, index_descriptors, stack, train_vocabulary, words_per_image,
-};
+use bowloc::pipeline::{Localizer, words_per_image};
 use bowloc::search::{RuleSpec, SearchOptions, permute, search_words};
-use bowloc::vocabulary::kmeans::KmeansConfig;
 
 /// Recall@1 of rule `fixed` at 10 % of the features over three feature
 /// orders, measured on this dataset at K = 1000, seed 1 (printed by this
@@ -25,24 +20,12 @@ const MIN_GAIN: f64 = 0.03;
 
 #[test]
 fn verification_raises_recall_at_1_of_an_early_stopped_search() {
-    let data = Dataset::open(&common::dataset("rtabmap-loop")).unwrap();
-    let extract = ExtractConfig::default();
-    let limits = DecodeLimits::default();
-    let map_features = extract_all(&data.map, &extract, limits, false, "map").unwrap();
-    let parts: Vec<_> = map_features.iter().flatten().collect();
-    let vocab = train_vocabulary(
-        stack(&parts).view(),
-        &extract,
-        &KmeansConfig {
-            k: 1000,
-            seed: 1,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let names: Vec<String> = data.map.iter().map(|i| i.name.clone()).collect();
-    let map = index_descriptors(&vocab, &names, &map_features, None, "rtabmap-loop");
-    let query_features = extract_all(&data.queries, &extract, limits, false, "queries").unwrap();
+    let common::RealMap {
+        data,
+        vocab,
+        map,
+        queries: query_features,
+    } = common::real_map("rtabmap-loop", 1000);
     let query_words = words_per_image(&vocab, &query_features);
 
     let params = VerifyParams::default();

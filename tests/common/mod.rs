@@ -15,3 +15,41 @@ pub fn dataset(name: &str) -> PathBuf {
     );
     d
 }
+
+/// A shared dataset made ready for searching: a vocabulary of K words
+/// (k-means seed 1) trained on its map images, the map over them, and its
+/// queries extracted, as `bowloc eval` does with one vocabulary.
+#[allow(dead_code)]
+pub struct RealMap {
+    pub data: bowloc::dataset::Dataset,
+    pub vocab: bowloc::vocabulary::Vocabulary,
+    pub map: bowloc::index::MapIndex,
+    pub queries: Vec<Option<bowloc::features::Features>>,
+}
+
+/// [`RealMap`] for the shared dataset `name` at `words` words.
+#[allow(dead_code)]
+pub fn real_map(name: &str, words: usize) -> RealMap {
+    use bowloc::features::{DecodeLimits, ExtractConfig};
+    use bowloc::pipeline::{extract_all, index_descriptors, stack, train_vocabulary};
+    let data = bowloc::dataset::Dataset::open(&dataset(name)).unwrap();
+    let extract = ExtractConfig::default();
+    let limits = DecodeLimits::default();
+    let map_desc = extract_all(&data.map, &extract, limits, false, "map").unwrap();
+    let parts: Vec<_> = map_desc.iter().flatten().collect();
+    let config = bowloc::vocabulary::kmeans::KmeansConfig {
+        k: words,
+        seed: 1,
+        ..Default::default()
+    };
+    let vocab = train_vocabulary(stack(&parts).view(), &extract, &config).unwrap();
+    let names: Vec<String> = data.map.iter().map(|i| i.name.clone()).collect();
+    let map = index_descriptors(&vocab, &names, &map_desc, None, name);
+    let queries = extract_all(&data.queries, &extract, limits, false, "queries").unwrap();
+    RealMap {
+        data,
+        vocab,
+        map,
+        queries,
+    }
+}
