@@ -48,8 +48,11 @@ fn files() -> &'static (PathBuf, PathBuf) {
 }
 
 fn state(loaded: bool) -> Arc<AppState> {
+    state_with(loaded, Config::default())
+}
+
+fn state_with(loaded: bool, mut config: Config) -> Arc<AppState> {
     let (v, m) = files();
-    let mut config = Config::default();
     config.files.vocabulary = v.clone();
     config.files.map = m.clone();
     config.files.images = common::dataset("rtabmap-loop");
@@ -498,4 +501,29 @@ async fn protobuf_answer_carries_the_sequence_block() {
             assert!((p.probability.expect("a probability") - want).abs() < 1e-12);
         }
     }
+}
+
+#[tokio::test]
+async fn a_single_query_by_the_posterior_rule_weighs_votes_at_the_configured_kappa() {
+    // the top candidate's probability given the votes alone, at κ
+    let top = |kappa: f64| async move {
+        let mut config = Config::default();
+        config.sequence.kappa = kappa;
+        let state = state_with(true, config);
+        let (status, _, body) = send(
+            &state,
+            localize("seed=3&rule=posterior&threshold=0.01", "application/json"),
+        )
+        .await;
+        assert_eq!(status, StatusCode::OK);
+        let json: serde_json::Value = serde_json::from_slice(&body).unwrap();
+        json["candidates"][0]["probability"]
+            .as_f64()
+            .expect("a posterior query's candidates carry probabilities")
+    };
+    let (weak, strong) = (top(0.05).await, top(2.0).await);
+    assert!(
+        weak < strong,
+        "a smaller κ trusts the votes less: {weak} vs {strong}"
+    );
 }

@@ -577,14 +577,20 @@ pub async fn localize(
         None => None,
     };
     let images = snapshot.meta().images;
-    if let Some(ids) = &allowed
-        && sequence.is_none()
-    {
-        options.prior = Some(Arc::new(Prior::only(
-            images,
-            ids.iter().copied(),
-            model.kappa,
-        )));
+    if sequence.is_none() {
+        // a single query's prior: the images near= allows, else — for the
+        // `posterior` rule — uniform, weighing votes at the configured κ
+        options.prior = match &allowed {
+            Some(ids) => Some(Arc::new(Prior::only(
+                images,
+                ids.iter().copied(),
+                model.kappa,
+            ))),
+            None if options.rule.name == "posterior" => {
+                Some(Arc::new(Prior::uniform(images, model.kappa)))
+            }
+            None => None,
+        };
     }
     let image = receive_image(&state, request, deadline, localizer.limits).await?;
     // A frame of a sequence holds its sequence's lock from prediction to
