@@ -47,7 +47,7 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     let snapshot = localizer.map.snapshot();
     let topology = Topology::of(
         TopologyKind::Auto,
-        snapshot.meta().images,
+        snapshot.id_range(),
         snapshot.positions(),
     )
     .map_err(anyhow::Error::msg)?;

@@ -80,6 +80,11 @@ pub trait MapRead: Send + Sync {
     fn image(&self, id: u32) -> ImageInfo<'_>;
     /// The stored features of image `id`, sorted by word.
     fn geometry(&self, id: u32) -> &[PackedFeature];
+    /// Image ids run from 0 to this (a live map's removed ids included: ids
+    /// are not reused until a compaction renumbers the images).
+    fn id_range(&self) -> usize {
+        self.meta().images
+    }
     /// Each image's position (pose fields `x` and `y`; NaN where unknown),
     /// when the map has both fields.
     fn positions(&self) -> Option<Vec<[f64; 2]>> {

@@ -246,4 +246,21 @@ impl MapRead for Snapshot {
             Some(a) => &a.image.geometry,
         }
     }
+
+    fn id_range(&self) -> usize {
+        self.overlay.ids() as usize
+    }
+
+    /// The file's positions, then the added images' (NaN where unknown).
+    fn positions(&self) -> Option<Vec<[f64; 2]>> {
+        let fields = &self.meta.pose_fields;
+        let x = fields.iter().position(|f| f == "x")?;
+        let y = fields.iter().position(|f| f == "y")?;
+        let mut out = self.base.positions()?;
+        out.extend(self.added.iter().map(|a| {
+            let at = |k: usize| a.pose.get(k).copied().unwrap_or(f64::NAN);
+            [at(x), at(y)]
+        }));
+        Some(out)
+    }
 }

@@ -333,3 +333,19 @@ fn a_fixed_map_takes_no_changes() {
         Err(WriteError::ReadOnly)
     ));
 }
+
+#[test]
+fn ids_run_past_the_image_count_once_images_were_removed_and_added() {
+    let s = scenario();
+    let live = live_with_changes(&s);
+    let adds = s
+        .changes
+        .iter()
+        .filter(|c| matches!(c, Change::Add(_)))
+        .count();
+    assert_eq!(live.id_range(), s.file.len() + adds);
+    // fewer images than ids: code sized by the count would miss the last ids
+    assert!(live.meta().images < live.id_range());
+    let last = live.ids().last().unwrap();
+    assert!(live.contains(last) && last as usize >= live.meta().images);
+}

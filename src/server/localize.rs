@@ -576,7 +576,7 @@ pub async fn localize(
         }
         None => None,
     };
-    let images = snapshot.meta().images;
+    let images = snapshot.id_range();
     if sequence.is_none() {
         // a single query's prior: the images near= allows, else — for the
         // `posterior` rule — uniform, weighing votes at the configured κ

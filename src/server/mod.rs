@@ -134,10 +134,9 @@ impl AppState {
             queue = self.pool.queue_capacity(),
             "ready"
         );
-        let snapshot = localizer.map.snapshot();
         let topology = crate::sequence::Topology::of(
             self.config.sequence.topology,
-            snapshot.meta().images,
+            snapshot.id_range(),
             snapshot.positions(),
         );
         if let Err(e) = &topology {

@@ -29,8 +29,8 @@ pub const DEFAULT_SIZE: u32 = 160;
 pub const MAX_SIZE: u32 = 640;
 const MIN_SIZE: u32 = 16;
 
-/// The most recently used thumbnails, by (map name, image id, size).
-pub struct ThumbnailCache(Mutex<lru::LruCache<(String, u32, u32), Bytes>>);
+/// The most recently used thumbnails, by (map file fingerprint, image id, size).
+pub struct ThumbnailCache(Mutex<lru::LruCache<(u64, u32, u32), Bytes>>);
 
 impl Default for ThumbnailCache {
     fn default() -> Self {
@@ -41,11 +41,11 @@ impl Default for ThumbnailCache {
 }
 
 impl ThumbnailCache {
-    fn get(&self, key: &(String, u32, u32)) -> Option<Bytes> {
+    fn get(&self, key: &(u64, u32, u32)) -> Option<Bytes> {
         self.0.lock().ok()?.get(key).cloned()
     }
 
-    fn put(&self, key: (String, u32, u32), jpeg: Bytes) {
+    fn put(&self, key: (u64, u32, u32), jpeg: Bytes) {
         if let Ok(mut cache) = self.0.lock() {
             cache.put(key, jpeg);
         }
@@ -115,7 +115,7 @@ pub fn resolve(folder: &std::path::Path, name: &str) -> Option<PathBuf> {
     path = "/images/{id}/thumbnail",
     tag = "page",
     params(
-        ("id" = u32, Path, description = "Map image id (0 to the map's image count − 1)."),
+        ("id" = u32, Path, description = "Map image id (the `id` of a `/localize` candidate)."),
         ThumbnailParams,
     ),
     responses(
@@ -139,9 +139,11 @@ pub async fn thumbnail(
     let missing = || ApiError::not_found_because(format!("no map image `{id}`"));
     let snapshot = localizer.map.snapshot();
     let id = parse_id(&id)
-        .filter(|&i| (i as usize) < snapshot.meta().images && snapshot.contains(i))
+        .filter(|&i| snapshot.contains(i))
         .ok_or_else(missing)?;
-    let key = (snapshot.meta().name.clone(), id, size);
+    // ids are the map file's until a compaction renumbers them, and a
+    // compaction writes a new file: its fingerprint keeps ids apart
+    let key = (snapshot.base().fingerprint(), id, size);
     if let Some(jpeg) = state.thumbnails.get(&key) {
         return Ok(jpeg_response(jpeg));
     }
