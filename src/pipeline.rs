@@ -409,7 +409,7 @@ impl Localizer {
     /// quantized, as `bowloc map build` indexes it.
     pub fn map_features(&self, bytes: &[u8]) -> Result<Vec<PackedFeature>, FeatureError> {
         let image = features::decode(bytes, self.limits)?;
-        let (f, _) = extract_tiled(&image, &self.vocab.meta().extract, TileGrid::WHOLE)?;
+        let f = features::extract(&image, &self.vocab.meta().extract)?;
         Ok(map_image_words(self.vocab.exact_quantizer(), "", Some(&f)).geometry)
     }
 

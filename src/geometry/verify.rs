@@ -276,15 +276,16 @@ pub fn fit_inliers(
     (verification, Correspondences { query: q, map: m })
 }
 
-/// Verify one map image's stored features against the query's.
+/// Verify one map image's stored features against the query's: the
+/// verification and the pairs the fit took as inliers.
 pub fn verify_features(
     map_features: &[PackedFeature],
     query: &QueryFeatures,
     fit: &dyn ModelFit,
     params: &VerifyParams,
-) -> Verification {
+) -> (Verification, Correspondences) {
     let c = tentative(query, map_features, params.max_word_pairs);
-    count_inliers(&c, fit, params.min_inliers)
+    fit_inliers(&c, fit, params.min_inliers)
 }
 
 /// Verify the current leader against the features seen so far: what a
@@ -303,6 +304,7 @@ pub fn verify_leader(
         fit,
         params,
     )
+    .0
 }
 
 /// One candidate after re-ranking.
@@ -367,8 +369,7 @@ pub fn rerank(
         .enumerate()
         .map(|(i, &(id, votes))| {
             let (verification, inlier_pairs) = if i < k {
-                let c = tentative(&query, map.geometry(id), params.max_word_pairs);
-                let (v, pairs) = fit_inliers(&c, fit, params.min_inliers);
+                let (v, pairs) = verify_features(map.geometry(id), &query, fit, params);
                 (Some(v), pairs)
             } else {
                 (None, Correspondences::default())
