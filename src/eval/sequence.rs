@@ -27,7 +27,7 @@ use super::{maps_of, quantize_queries, vocabularies};
 use crate::dataset::{Dataset, image_list};
 use crate::features::{ExtractConfig, TileGrid};
 use crate::index::MapIndex;
-use crate::search::{Prior, RuleSpec, SearchOptions};
+use crate::search::{RuleSpec, SearchOptions};
 use crate::sequence::{Filter, SequenceModel, Topology, TopologyKind};
 use anyhow::Context;
 use rayon::prelude::*;
@@ -201,7 +201,7 @@ fn pass(
         // `posterior` weighs evidence as the filter does
         options.prior = Some(Arc::new(match &prediction {
             Some(pr) => pr.prior.clone(),
-            None => Prior::uniform(topology.images(), model.kappa).keeping(model.track),
+            None => model.uniform_prior(topology.images()),
         }));
         let replay = query.search(map, &options, false);
         let ranked: Vec<u32> = match (&prediction, replay.outcome.posterior.clone()) {

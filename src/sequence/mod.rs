@@ -67,6 +67,12 @@ impl Default for SequenceModel {
 }
 
 impl SequenceModel {
+    /// The prior of a frame that knows nothing of where it is: uniform over
+    /// `images` ids, votes weighed at κ, keeping the `track` most probable.
+    pub fn uniform_prior(&self, images: usize) -> Prior {
+        Prior::uniform(images, self.kappa).keeping(self.track)
+    }
+
     /// The values' ranges.
     pub fn check(&self) -> Result<(), String> {
         self.motion.check()?;
@@ -179,11 +185,7 @@ impl Filter {
             Topology::Order { .. } => model.window,
             _ => 0,
         };
-        let uniform = || {
-            Prior::uniform(images, model.kappa)
-                .keeping(model.track)
-                .with_window(window)
-        };
+        let uniform = || model.uniform_prior(images).with_window(window);
         let (prior, steps) = match (restart, &self.belief) {
             (None, Some(belief)) => {
                 let steps = frame - self.last_frame.unwrap_or(frame);

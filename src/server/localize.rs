@@ -586,9 +586,7 @@ pub async fn localize(
                 ids.iter().copied(),
                 model.kappa,
             ))),
-            None if options.rule.name == "posterior" => {
-                Some(Arc::new(Prior::uniform(images, model.kappa)))
-            }
+            None if options.rule.name == "posterior" => Some(Arc::new(model.uniform_prior(images))),
             None => None,
         };
     }
