@@ -64,12 +64,13 @@ pub struct ShardRow {
     pub largest_shard: f64,
 }
 
-/// The settings simulated by default: every vote-only rule of the registry
-/// at its example value (no warm-up), and the recommended default.
+/// The settings simulated by default: every rule of the registry a sharded
+/// map runs ([`crate::search::stop::RuleInfo::shardable`]) at its example value (no warm-up), and
+/// the recommended default.
 pub fn default_settings() -> Vec<Setting> {
     let mut settings: Vec<Setting> = RULES
         .iter()
-        .filter(|r| !r.geometric)
+        .filter(|r| r.shardable())
         .map(|r| {
             let rule = RuleSpec::new(r.name, r.parameter.map(|p| p.example))
                 .expect("the registry's example values are valid");
@@ -125,8 +126,8 @@ pub fn run(config: &ShardsConfig) -> anyhow::Result<Vec<ShardRow>> {
             .collect::<anyhow::Result<_>>()?
     };
     anyhow::ensure!(
-        settings.iter().all(|s| !s.rule.info().geometric),
-        "geometric rules are not simulated on shards"
+        settings.iter().all(|s| s.rule.info().shardable()),
+        "rules that verify geometry or read the whole histogram are not simulated on shards"
     );
     let mut rows = Vec::new();
     for (seed, map, queries) in seed_maps(config)? {

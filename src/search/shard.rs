@@ -431,12 +431,7 @@ mod tests {
                 sharded.postings_per_shard().iter().sum::<usize>(),
                 map.view().postings.len()
             );
-            // `posterior` reads the whole histogram, which shards do not
-            // send: on a sharded map it never stops (documented there)
-            for info in RULES
-                .iter()
-                .filter(|r| !r.geometric && r.name != "posterior")
-            {
+            for info in RULES.iter().filter(|r| r.shardable()) {
                 let rule = RuleSpec::new(info.name, info.parameter.map(|p| p.example)).unwrap();
                 for q in 0..12u64 {
                     // a map image's words, with another's mixed in, as four tiles

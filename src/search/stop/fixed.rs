@@ -16,6 +16,7 @@ pub const INFO: RuleInfo = RuleInfo {
     grid: Grid::Values(&[0.3, 0.5, 0.7]),
     about: "stop after a fixed fraction f of the features",
     geometric: false,
+    whole_histogram: false,
     make: |f, _| Ok(Box::new(Fixed(f))),
 };
 

@@ -27,6 +27,7 @@ pub const INFO: RuleInfo = RuleInfo {
     grid: Grid::Single,
     about: "stop when the remaining features cannot change the top-n answer",
     geometric: false,
+    whole_histogram: false,
     make: |_, ctx: &RuleContext| {
         Ok(Box::new(Lossless {
             n: ctx.top_n.max(1),

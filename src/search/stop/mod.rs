@@ -175,8 +175,20 @@ pub struct RuleInfo {
     /// Whether the rule verifies candidates geometrically (it needs a
     /// [`LeaderCheck`], and its answers are re-ranked by verification).
     pub geometric: bool,
+    /// Whether the rule reads every image's votes (with the search's
+    /// prior), which the shards of a sharded map do not send.
+    pub whole_histogram: bool,
     /// Build an instance from a parameter value within its range.
     pub make: MakeRule,
+}
+
+impl RuleInfo {
+    /// Whether a sharded map runs the rule as one machine does
+    /// ([`crate::search::shard`]): neither a geometric check nor the whole
+    /// histogram.
+    pub fn shardable(&self) -> bool {
+        !self.geometric && !self.whole_histogram
+    }
 }
 
 /// The name every rule's parameter also answers to (`threshold=` in the API

@@ -9,6 +9,7 @@ pub const INFO: RuleInfo = RuleInfo {
     grid: Grid::Single,
     about: "full bag-of-words: quantize every feature",
     geometric: false,
+    whole_histogram: false,
     make: |_, _| Ok(Box::new(NoStop)),
 };
 

@@ -23,6 +23,7 @@ pub const INFO: RuleInfo = RuleInfo {
     },
     about: "rule 1: stop when max(h) − mean(h) > T",
     geometric: false,
+    whole_histogram: false,
     make: |t, _| Ok(Box::new(PeakMean(t))),
 };
 

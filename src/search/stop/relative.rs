@@ -18,6 +18,7 @@ pub const INFO: RuleInfo = RuleInfo {
     },
     about: "rule 2: stop when (max(h) − mean(h)) / mean(h) > T",
     geometric: false,
+    whole_histogram: false,
     make: |t, _| Ok(Box::new(Relative(t))),
 };
 

@@ -19,6 +19,7 @@ pub const INFO: RuleInfo = RuleInfo {
     },
     about: "rule 3: stop when the peak has not changed for T features",
     geometric: false,
+    whole_histogram: false,
     make: |t, _| {
         Ok(Box::new(StablePeak {
             needed: t as usize,
