@@ -131,9 +131,8 @@ pub struct RacePoint {
     pub runner_up_votes: f32,
     /// The mean vote over all map images, mean(h).
     pub mean_votes: f64,
-    /// The number the rule compares with its threshold (absent for a rule
-    /// without one: `none`, `lossless`, `confident`; `verified` gives the
-    /// leader's inliers at its last check).
+    /// The number the rule compares with its threshold, as the rule's
+    /// description says (absent for a rule that compares none).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub statistic: Option<f64>,
     /// The threshold the statistic must pass.

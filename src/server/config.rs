@@ -212,7 +212,7 @@ pub struct FilesConfig {
 #[serde(deny_unknown_fields, default)]
 pub struct SearchDefaults {
     pub rule: String,
-    /// Parameter of `rule` (threshold, delta or fraction), when it takes one.
+    /// Parameter of `rule`, when it takes one (`bowloc rules` names each).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub threshold: Option<f64>,
     pub top_n: usize,
