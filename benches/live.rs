@@ -1,6 +1,9 @@
 //! Live maps on a synthetic map of 10 000 images (K = 5 000 words, 300
 //! features per image, Zipf word law, stored geometry like a real map):
 //!
+//! 0. opening the map: with its (empty) change log, read only
+//!    (`LiveMap::fixed`), and the map file alone (`MapIndex::open`),
+//!    interleaved, 21 each, medians; then the first lookup by name;
 //! 1. adds excluding SIFT: weighting, the change log's append and fsync,
 //!    publishing the snapshot — 1 000 adds (10 % of the map), median and
 //!    90th percentile, and the median of the first and last 100 (the cost of
@@ -18,7 +21,7 @@
 use bowloc::geometry::Keypoint;
 use bowloc::geometry::packed::pack_image;
 use bowloc::index::synthetic::zipf_query;
-use bowloc::index::{ImageWords, MapBuilder};
+use bowloc::index::{ImageWords, MapBuilder, MapIndex};
 use bowloc::live::{Change, LiveMap, NewImage};
 use bowloc::search::{RuleSpec, SearchOptions, search_words};
 use std::hint::black_box;
@@ -65,8 +68,40 @@ fn main() {
         b.add(ImageWords::with_geometry(format!("file/{j}"), &words, &kps));
     }
     b.build("zipf", "synthetic", None).save(&path).unwrap();
-    let (live, _) = LiveMap::open(&path, None, false, usize::MAX).unwrap();
     println!("map: {images} images, {WORDS} words, {FEATURES} features per image; {added} adds");
+
+    // 0. open
+    let mut opens = [Vec::new(), Vec::new(), Vec::new()];
+    for round in 0..21 {
+        for which in [0, 1, 2].map(|k| (k + round) % 3) {
+            let started = Instant::now();
+            match which {
+                0 => drop(black_box(
+                    LiveMap::open(&path, None, false, usize::MAX).unwrap(),
+                )),
+                1 => drop(black_box(LiveMap::fixed(
+                    MapIndex::open(&path, false).unwrap(),
+                ))),
+                _ => drop(black_box(MapIndex::open(&path, false).unwrap())),
+            }
+            opens[which].push(started.elapsed());
+        }
+    }
+    let [with_log, fixed, file] = opens.map(|mut t| median(&mut t));
+    println!(
+        "open (median of 21): with its change log {:.3} ms, without (read only) {:.3} ms, map file alone {:.3} ms",
+        ms(with_log),
+        ms(fixed),
+        ms(file),
+    );
+
+    let (live, _) = LiveMap::open(&path, None, false, usize::MAX).unwrap();
+    let started = Instant::now();
+    assert_eq!(live.snapshot().id_of("file/7"), Some(7));
+    println!(
+        "first lookup by name (sorts the file's names): {:.3} ms",
+        ms(started.elapsed())
+    );
 
     // 1. adds
     let mut times = Vec::with_capacity(added);
@@ -122,7 +157,7 @@ fn main() {
     bowloc::live::compact::fold(&with_changes)
         .save(&compacted_path)
         .unwrap();
-    let compacted = bowloc::index::MapIndex::open(&compacted_path, false).unwrap();
+    let compacted = MapIndex::open(&compacted_path, false).unwrap();
     let queries: Vec<Vec<u32>> = (0..60)
         .map(|q| zipf_query(WORDS, QUERY_FEATURES, 5_000_000 + q))
         .collect();

@@ -15,7 +15,7 @@ use crate::geometry::packed::PackedFeature;
 use crate::index::build::weigh;
 use crate::index::metadata::pose_of;
 use crate::index::{ImageInfo, ImageWords, MapIndex, MapMeta, MapRead, MapView, Overlay};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 /// An image added since the map file was written.
 #[derive(Debug)]
@@ -70,8 +70,12 @@ pub struct Snapshot {
     overlay: Overlay,
     /// Added images; `added[k]` has id `overlay.first() + k`.
     added: imbl::Vector<Arc<Added>>,
-    /// Name → id of every image in the map (not removed).
-    names: imbl::HashMap<Arc<str>, u32>,
+    /// The map file's ids ordered by (name, id), to find a file image by
+    /// name; built on the first lookup by name (queries never need it) and
+    /// shared by every snapshot of the same file.
+    file_names: Arc<OnceLock<Vec<u32>>>,
+    /// Name → id of the images added since the map file (not removed).
+    added_names: imbl::HashMap<Arc<str>, u32>,
     /// The base's meta, counting the images now in the map.
     meta: MapMeta,
     generation: u64,
@@ -80,16 +84,13 @@ pub struct Snapshot {
 impl Snapshot {
     /// The map file with no changes, at its own generation.
     pub fn new(base: Arc<MapIndex>) -> Self {
-        let view = base.view();
-        let names = (0..base.images() as u32)
-            .map(|j| (Arc::from(view.names.get(j as usize)), j))
-            .collect();
         let meta = base.meta().clone();
         Self {
             overlay: Overlay::new(base.images() as u32, base.words()),
             generation: meta.generation,
             added: imbl::Vector::new(),
-            names,
+            file_names: Arc::default(),
+            added_names: imbl::HashMap::new(),
             meta,
             base,
         }
@@ -110,16 +111,29 @@ impl Snapshot {
 
     /// Images in the map now.
     pub fn len(&self) -> usize {
-        self.names.len()
+        self.meta.images
     }
 
     pub fn is_empty(&self) -> bool {
-        self.names.is_empty()
+        self.len() == 0
     }
 
-    /// Id of the image named `name`.
+    /// Id of the image named `name` (of two file images of one name, the
+    /// later).
     pub fn id_of(&self, name: &str) -> Option<u32> {
-        self.names.get(name).copied()
+        if let Some(&id) = self.added_names.get(name) {
+            return Some(id);
+        }
+        let names = self.base.view().names;
+        let sorted = self.file_names.get_or_init(|| {
+            let all: Vec<&str> = (0..self.base.images()).map(|j| names.get(j)).collect();
+            let mut ids: Vec<u32> = (0..all.len() as u32).collect();
+            ids.sort_unstable_by_key(|&j| (all[j as usize], j));
+            ids
+        });
+        let after = sorted.partition_point(|&j| names.get(j as usize) <= name);
+        let id = *sorted.get(after.checked_sub(1)?)?;
+        (names.get(id as usize) == name && !self.overlay.is_removed(id)).then_some(id)
     }
 
     /// Whether image `id` is in the map (exists and is not removed).
@@ -182,7 +196,7 @@ impl Snapshot {
         self.meta.postings += entries.len();
         self.meta.features += added.image.features as u64;
         self.meta.images_without_features += (added.image.features == 0) as usize;
-        self.names.insert(Arc::from(i.name.as_str()), id);
+        self.added_names.insert(Arc::from(i.name.as_str()), id);
         self.added.push_back(Arc::new(added));
         Ok(Applied {
             id,
@@ -194,7 +208,7 @@ impl Snapshot {
         let id = self
             .id_of(name)
             .ok_or_else(|| ApplyError::NotFound(name.to_owned()))?;
-        self.names.remove(name);
+        self.added_names.remove(name);
         self.drop_image(id);
         Ok(Applied {
             id,

@@ -349,3 +349,40 @@ fn ids_run_past_the_image_count_once_images_were_removed_and_added() {
     let last = live.ids().last().unwrap();
     assert!(live.contains(last) && last as usize >= live.meta().images);
 }
+
+#[test]
+fn names_find_the_images_in_the_map_and_only_those() {
+    let s = scenario();
+    let live = live_with_changes(&s);
+    for (id, i) in live.ids().zip(&s.kept) {
+        assert_eq!(live.id_of(&i.name), Some(id), "{}", i.name);
+    }
+    assert_eq!(live.len(), s.kept.len());
+    assert_eq!(live.len(), live.ids().count());
+    // removed ones, from the file and added
+    for name in ["f3", "f29", "a2", "nope", ""] {
+        assert_eq!(live.id_of(name), None, "{name}");
+    }
+    // replaced: the added image, not the file's
+    assert!(live.id_of("f7").unwrap() as usize >= s.file.len());
+    // a snapshot taken before a change keeps its names
+    let before = Snapshot::new(Arc::new(file_map(&s.file)));
+    assert!(before.id_of("f3").is_some());
+    let mut after = before.clone();
+    let remove = Record {
+        generation: 1,
+        change: Change::Remove { name: "f3".into() },
+    };
+    after.apply(&remove, usize::MAX).unwrap();
+    assert_eq!((before.id_of("f3"), after.id_of("f3")), (Some(3), None));
+}
+
+#[test]
+fn of_two_file_images_of_one_name_the_later_is_found() {
+    let mut images: Vec<NewImage> = (0..5).map(|j| new_image(&format!("i{j}"), &[j])).collect();
+    images[3].name = "i1".into();
+    let live = Snapshot::new(Arc::new(file_map(&images)));
+    assert_eq!(live.id_of("i1"), Some(3));
+    assert_eq!(live.id_of("i4"), Some(4));
+    assert_eq!(live.id_of("i3"), None);
+}
