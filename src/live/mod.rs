@@ -172,33 +172,29 @@ impl LiveMap {
             Ok(bytes) => {
                 let parsed = log::parse(&bytes)
                     .map_err(|e| anyhow::anyhow!("{}: {e}", log_path.display()))?;
-                let newer = parsed
+                let newer: Vec<&Record> = parsed
                     .records
                     .iter()
                     .filter(|r| r.generation > file_generation)
-                    .count();
-                if parsed.fingerprint != fingerprint || newer == 0 {
-                    if newer > 0 {
-                        anyhow::bail!(
-                            "{}: the change log holds {newer} changes for another map file than {} \
-                             (was the map rebuilt?); move the log away to serve the map without them",
-                            log_path.display(),
-                            path.display()
-                        );
-                    }
+                    .collect();
+                if newer.is_empty() {
                     // every record is in the map file (or there are none)
                     opened.reset = !parsed.records.is_empty();
                     LogWriter::create(&log_path, fingerprint)?
+                } else if parsed.fingerprint != fingerprint {
+                    anyhow::bail!(
+                        "{}: the change log holds {} changes for another map file than {} \
+                         (was the map rebuilt?); move the log away to serve the map without them",
+                        log_path.display(),
+                        newer.len(),
+                        path.display()
+                    );
                 } else {
                     if let Some(why) = &parsed.dropped {
                         tracing::warn!(log = %log_path.display(), "change log tail cut off: {why}");
                         opened.dropped = Some(why.clone());
                     }
-                    for record in parsed
-                        .records
-                        .iter()
-                        .filter(|r| r.generation > file_generation)
-                    {
+                    for record in newer {
                         if let Err(e) = snapshot.apply(record, usize::MAX) {
                             tracing::warn!(
                                 generation = record.generation,
