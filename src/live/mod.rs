@@ -177,11 +177,7 @@ impl LiveMap {
                     .iter()
                     .filter(|r| r.generation > file_generation)
                     .collect();
-                if newer.is_empty() {
-                    // every record is in the map file (or there are none)
-                    opened.reset = !parsed.records.is_empty();
-                    LogWriter::create(&log_path, fingerprint)?
-                } else if parsed.fingerprint != fingerprint {
+                if !newer.is_empty() && parsed.fingerprint != fingerprint {
                     anyhow::bail!(
                         "{}: the change log holds {} changes for another map file than {} \
                          (was the map rebuilt?); move the log away to serve the map without them",
@@ -189,11 +185,18 @@ impl LiveMap {
                         newer.len(),
                         path.display()
                     );
+                }
+                // also when no record before it is replayed: a first record
+                // that fails its checksum hides every change after it
+                if let Some(why) = &parsed.dropped {
+                    tracing::warn!(log = %log_path.display(), "change log tail cut off: {why}");
+                    opened.dropped = Some(why.clone());
+                }
+                if newer.is_empty() {
+                    // every record is in the map file (or there are none)
+                    opened.reset = !parsed.records.is_empty();
+                    LogWriter::create(&log_path, fingerprint)?
                 } else {
-                    if let Some(why) = &parsed.dropped {
-                        tracing::warn!(log = %log_path.display(), "change log tail cut off: {why}");
-                        opened.dropped = Some(why.clone());
-                    }
                     for record in newer {
                         if let Err(e) = snapshot.apply(record, usize::MAX) {
                             tracing::warn!(

@@ -386,3 +386,24 @@ fn of_two_file_images_of_one_name_the_later_is_found() {
     assert_eq!(live.id_of("i4"), Some(4));
     assert_eq!(live.id_of("i3"), None);
 }
+
+#[test]
+fn a_corrupt_first_record_is_reported_though_nothing_is_replayed() {
+    let s = scenario();
+    let dir = tempfile::tempdir().unwrap();
+    let path = saved(dir.path(), &s.file);
+    let (live, _) = LiveMap::open(&path, None, true, usize::MAX).unwrap();
+    for change in &s.changes[..3] {
+        live.apply(change.clone()).unwrap();
+    }
+    drop(live);
+    let log = log::path_for(&path);
+    let mut bytes = std::fs::read(&log).unwrap();
+    bytes[log::HEADER_LEN + 8] ^= 0x40; // the first record's payload
+    std::fs::write(&log, &bytes).unwrap();
+    let (live, opened) = LiveMap::open(&path, None, true, usize::MAX).unwrap();
+    assert_eq!(opened.replayed, 0);
+    let why = opened.dropped.expect("the cut reported");
+    assert!(why.contains("after record 0"), "{why}");
+    assert_eq!(live.snapshot().len(), s.file.len());
+}
