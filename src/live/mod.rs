@@ -192,11 +192,13 @@ impl LiveMap {
                     tracing::warn!(log = %log_path.display(), "change log tail cut off: {why}");
                     opened.dropped = Some(why.clone());
                 }
-                if newer.is_empty() {
-                    // every record is in the map file (or there are none)
+                let stale = !parsed.records.is_empty() || parsed.fingerprint != fingerprint;
+                if newer.is_empty() && stale {
+                    // every record is in the map file: a new empty log for it
                     opened.reset = !parsed.records.is_empty();
                     LogWriter::create(&log_path, fingerprint)?
                 } else {
+                    // the records to replay, or an empty log of this map kept as it is
                     for record in newer {
                         if let Err(e) = snapshot.apply(record, usize::MAX) {
                             tracing::warn!(

@@ -407,3 +407,29 @@ fn a_corrupt_first_record_is_reported_though_nothing_is_replayed() {
     assert!(why.contains("after record 0"), "{why}");
     assert_eq!(live.snapshot().len(), s.file.len());
 }
+
+#[test]
+fn an_empty_log_of_the_map_is_kept_and_its_torn_tail_cut() {
+    use std::os::unix::fs::MetadataExt;
+    let s = scenario();
+    let dir = tempfile::tempdir().unwrap();
+    let path = saved(dir.path(), &s.file);
+    let log = log::path_for(&path);
+    drop(LiveMap::open(&path, None, true, usize::MAX).unwrap());
+    let inode = std::fs::metadata(&log).unwrap().ino();
+    let mut bytes = std::fs::read(&log).unwrap();
+    bytes.extend_from_slice(&[9, 0, 0]);
+    std::fs::write(&log, &bytes).unwrap();
+    let (live, opened) = LiveMap::open(&path, None, true, usize::MAX).unwrap();
+    assert!(opened.dropped.is_some() && !opened.reset && opened.replayed == 0);
+    assert_eq!(
+        std::fs::metadata(&log).unwrap().ino(),
+        inode,
+        "not rewritten"
+    );
+    assert_eq!(std::fs::read(&log).unwrap().len(), log::HEADER_LEN);
+    live.apply(s.changes[0].clone()).unwrap();
+    drop(live);
+    let (_, opened) = LiveMap::open(&path, None, true, usize::MAX).unwrap();
+    assert_eq!(opened.replayed, 1);
+}
