@@ -355,10 +355,6 @@ impl LogWriter {
     pub fn is_empty(&self) -> bool {
         self.records == 0
     }
-
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
 }
 
 fn lock(file: &File, path: &Path) -> Result<(), LogError> {

@@ -232,11 +232,6 @@ impl<'m> Search<'m> {
         self.voter.tally()
     }
 
-    /// Features given so far, over all batches.
-    pub fn fed(&self) -> usize {
-        self.fed
-    }
-
     /// (feature number over all batches, word) of each feature voted so far.
     pub fn voted(&self) -> &[(u32, u32)] {
         &self.voted

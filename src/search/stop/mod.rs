@@ -124,17 +124,6 @@ impl Range {
             Self::Fraction => "a number in (0, 1]".into(),
         }
     }
-
-    /// Smallest and largest value (for API documents), and whether the ends
-    /// are excluded.
-    pub fn bounds(self) -> (f64, Option<f64>, bool) {
-        match self {
-            Self::NonNegative | Self::Count => (0.0, None, false),
-            Self::Whole { min, max } => (min as f64, Some(max as f64), false),
-            Self::Open01 => (0.0, Some(1.0), true),
-            Self::Fraction => (0.0, Some(1.0), false),
-        }
-    }
 }
 
 /// A rule's one parameter.
