@@ -350,11 +350,14 @@ impl<'m> Search<'m> {
         let (posterior, frame_posterior) = match prior {
             Some(p) => {
                 let (h, touched) = (self.voter.histogram(), self.voter.touched());
-                let uniform = Prior::uniform(p.images(), p.kappa).keeping(p.keep);
-                (
-                    Some(prior::posterior(p, h, touched, used, p.keep)),
-                    Some(prior::posterior(&uniform, h, touched, used, p.keep)),
-                )
+                let posterior = prior::posterior(p, h, touched, used, p.keep);
+                let frame = if p.is_uniform() {
+                    posterior.clone()
+                } else {
+                    let uniform = Prior::uniform(p.images(), p.kappa);
+                    prior::posterior(&uniform, h, touched, used, p.keep)
+                };
+                (Some(posterior), Some(frame))
             }
             None => (None, None),
         };

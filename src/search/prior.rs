@@ -147,6 +147,13 @@ impl Prior {
     pub fn restricts(&self) -> bool {
         self.floor == 0.0
     }
+
+    /// Whether every image weighs what it does in [`Prior::uniform`] (same
+    /// images and κ): a search's posterior under it is then its posterior
+    /// under a uniform prior, bit for bit.
+    pub fn is_uniform(&self) -> bool {
+        self.tracked.is_empty() && self.floor == Self::uniform(self.images, self.kappa).floor
+    }
 }
 
 /// A posterior (or any belief) over map images, kept sparse: the most
@@ -328,6 +335,23 @@ mod tests {
         assert_eq!(Prior::new(4, vec![], 0.0, 1.0), Prior::uniform(4, 1.0));
         let only = Prior::only(5, [4, 2], 1.0);
         assert!(only.restricts() && only.allows(2) && !only.allows(3));
+    }
+
+    #[test]
+    fn a_prior_is_uniform_when_no_image_weighs_apart() {
+        assert!(
+            Prior::uniform(7, 1.0)
+                .keeping(3)
+                .with_window(2)
+                .is_uniform()
+        );
+        assert!(Prior::new(7, vec![], 2.0, 1.0).is_uniform());
+        assert!(
+            Prior::new(7, vec![(9, 1.0)], 0.0, 1.0).is_uniform(),
+            "nothing to weigh"
+        );
+        assert!(!Prior::new(7, vec![(1, 2.0)], 1.0, 1.0).is_uniform());
+        assert!(!Prior::only(7, [1, 2], 1.0).is_uniform());
     }
 
     #[test]

@@ -317,3 +317,28 @@ fn traces_record_the_race_without_changing_it() {
         "only {stopped_early} rules stopped early"
     );
 }
+
+#[test]
+fn the_frame_posterior_is_the_posterior_under_a_uniform_prior() {
+    let (map, lists) = random_map(40, 11);
+    let query = &lists[5];
+    let with = |prior: Prior| {
+        search_words(
+            &map,
+            query,
+            &SearchOptions {
+                prior: Some(Arc::new(prior)),
+                ..opts("none", None, 3)
+            },
+        )
+    };
+    let model = crate::sequence::SequenceModel::default();
+    let uniform = with(model.uniform_prior(40));
+    let posterior = uniform.posterior.expect("a posterior");
+    assert!(posterior.top.len() > 1 && posterior.leader().unwrap().0 == 5);
+    assert_eq!(uniform.frame_posterior, Some(posterior.clone()));
+    // a prior of its own: the frame's posterior is still the uniform one
+    let skewed = with(Prior::new(40, vec![(7, 50.0)], 1.0, model.kappa).keeping(model.track));
+    assert_ne!(skewed.posterior, Some(posterior.clone()));
+    assert_eq!(skewed.frame_posterior, Some(posterior));
+}
