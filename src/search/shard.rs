@@ -138,9 +138,7 @@ impl Report {
             _ => [0.0; 3],
         };
         let outside = match (needs.outside, voter.tally().remaining()) {
-            (true, Some(left)) => (0..needs.top)
-                .map(|k| voter.best_outside(k, left as f32))
-                .collect(),
+            (true, Some(left)) => voter.best_outside_each(needs.top, left as f32),
             _ => Vec::new(),
         };
         Self {

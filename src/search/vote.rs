@@ -102,7 +102,8 @@ pub trait VoteStats {
     /// The most an image outside the first `n` of [`top`](Self::top) can
     /// reach with `left` more features: max of h(j) + left·cap_j over the
     /// images with votes, and left × the map's largest cap when some image
-    /// has none (needs `Needs::outside`). Scans the images with votes.
+    /// has none (needs `Needs::outside`). Scans the images with votes
+    /// ([`Voter::best_outside_each`]).
     fn best_outside(&self, n: usize, left: f32) -> f32;
 
     /// The whole histogram h and the images with a vote, when this view
@@ -313,6 +314,39 @@ impl<'a> Voter<'a> {
     pub fn set_vote_cap(&mut self, cap: f32) {
         self.tally.vote_cap = cap;
     }
+
+    /// [`VoteStats::best_outside`] for n = 0, 1, …, `count` − 1, from one
+    /// scan of the images with votes: it keeps their `count` highest bounds
+    /// h(j) + left·cap_j, and among them the first outside the first n
+    /// leaders is the highest outside (the n leaders take at most n of them).
+    /// The bounds cannot be kept as votes arrive: every feature lowers each
+    /// image's bound by its own cap, reordering images no vote touched.
+    pub fn best_outside_each(&self, count: usize, left: f32) -> Vec<f32> {
+        let mut best: Vec<(f32, u32)> = Vec::with_capacity(count + 1);
+        for &j in &self.touched {
+            let bound = self.hist[j as usize] + left * self.image_vote_cap(j);
+            if best.len() == count && best.last().is_none_or(|e| bound <= e.0) {
+                continue;
+            }
+            let at = best.partition_point(|e| e.0 >= bound);
+            best.insert(at, (bound, j));
+            best.truncate(count);
+        }
+        let untouched = if self.touched.len() < self.tally.images {
+            left * self.tally.vote_cap
+        } else {
+            0.0
+        };
+        let top = self.top.items();
+        (0..count)
+            .map(|n| {
+                let leaders = &top[..n.min(top.len())];
+                best.iter()
+                    .find(|e| !leaders.iter().any(|l| l.1 == e.1))
+                    .map_or(untouched, |e| e.0.max(untouched))
+            })
+            .collect()
+    }
 }
 
 impl VoteStats for Voter<'_> {
@@ -353,18 +387,7 @@ impl VoteStats for Voter<'_> {
     }
 
     fn best_outside(&self, n: usize, left: f32) -> f32 {
-        let top = self.top.items();
-        let leaders = &top[..n.min(top.len())];
-        let untouched = if self.touched.len() < self.tally.images {
-            left * self.tally.vote_cap
-        } else {
-            0.0
-        };
-        self.touched
-            .iter()
-            .filter(|&&j| !leaders.iter().any(|e| e.1 == j))
-            .map(|&j| self.hist[j as usize] + left * self.image_vote_cap(j))
-            .fold(untouched, f32::max)
+        self.best_outside_each(n + 1, left)[n]
     }
 }
 
@@ -429,6 +452,7 @@ mod tests {
                 assert!((voter.max_squares_except(j) - other).abs() < 1e-7);
             }
             // best_outside: every image outside the first k leaders, by brute force
+            let mut each = Vec::new();
             for k in 0..=3 {
                 let left = 2.0;
                 let leaders: Vec<u32> = voter.top().iter().take(k).map(|e| e.1).collect();
@@ -444,7 +468,10 @@ mod tests {
                     })
                     .fold(0.0f32, f32::max);
                 assert_eq!(voter.best_outside(k, left), want);
+                each.push(want);
             }
+            assert_eq!(voter.best_outside_each(4, 2.0), each);
+            assert!(voter.best_outside_each(0, 2.0).is_empty());
         }
         assert_eq!(voter.tally().features, stream.len());
     }
