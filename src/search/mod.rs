@@ -5,7 +5,7 @@
 //!
 //! - [`permute`]: a seeded random order of each batch's features;
 //! - quantize: blocks of `block` features at a time through a caller's
-//!   quantizer (a [`Quantizer`](crate::quantize::Quantizer), or known words);
+//!   quantizer (a [`Quantizer`], or known words);
 //! - [`vote`]: one feature at a time into the histogram;
 //! - [`stop`]: the rule is checked after every vote, so a stop in mid-block
 //!   wastes at most one block of quantization; once it fires, the caller

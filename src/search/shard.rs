@@ -274,7 +274,7 @@ pub struct Traffic {
     /// Messages both ways: 2 × shards × rounds.
     pub messages: usize,
     /// Bytes of those messages' contents (4 a word to the shards; the
-    /// reports back, [`Report::bytes`]), framing not counted.
+    /// reports back, `Report::bytes`), framing not counted.
     pub bytes: usize,
     /// Messages a round trip per feature would take: 2 × shards × features voted.
     pub per_feature_messages: usize,
