@@ -5,6 +5,7 @@
 use anyhow::Context;
 use bowloc::dataset::image_list;
 use bowloc::geometry::packed::PACKED_BYTES;
+use bowloc::index::metadata::pose_row;
 use bowloc::index::{MapRead, Places};
 use bowloc::live::{Applied, Change, LiveMap, NewImage, now_ms};
 use bowloc::pipeline::Localizer;
@@ -76,25 +77,16 @@ fn open_live(map: &std::path::Path) -> anyhow::Result<LiveMap> {
     Ok(live)
 }
 
+/// The pose row of `--pose FIELD=VALUE` arguments.
 fn pose_values(given: &[String], fields: &[String]) -> anyhow::Result<Vec<f64>> {
-    let mut pose = vec![f64::NAN; fields.len()];
-    for g in given {
-        let (k, v) = g
-            .split_once('=')
-            .ok_or_else(|| anyhow::anyhow!("--pose {g}: expected FIELD=VALUE"))?;
-        let i = fields.iter().position(|f| f == k).ok_or_else(|| {
-            anyhow::anyhow!(
-                "--pose {g}: the map's pose fields are [{}]",
-                fields.join(", ")
-            )
-        })?;
-        pose[i] = v
-            .parse::<f64>()
-            .ok()
-            .filter(|x| x.is_finite())
-            .ok_or_else(|| anyhow::anyhow!("--pose {g}: `{v}` is not a finite number"))?;
-    }
-    Ok(if given.is_empty() { Vec::new() } else { pose })
+    let pairs = given
+        .iter()
+        .map(|g| {
+            g.split_once('=')
+                .ok_or_else(|| anyhow::anyhow!("--pose {g}: expected FIELD=VALUE"))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    pose_row(fields, pairs).map_err(|e| anyhow::anyhow!("--pose {}: {e}", e.field()))
 }
 
 fn print_change(id: &str, applied: Applied, generation: u64, features: Option<usize>) {

@@ -11,6 +11,7 @@ use super::errors::{ApiError, ErrorBody};
 use super::localize::{ImageUpload, receive_image};
 use super::openapi::Binary;
 use crate::index::MapRead;
+use crate::index::metadata::{PoseError, pose_row};
 use crate::live::{Change, Compaction, NewImage, Snapshot, WriteError, now_ms};
 use axum::Json;
 use axum::extract::{Path, RawQuery, Request, State};
@@ -256,47 +257,32 @@ fn put_fields(query: Option<&str>, pose_fields: &[String]) -> Result<(String, Ve
     let pairs: Vec<(String, String)> = serde_urlencoded::from_str(query.unwrap_or(""))
         .map_err(|e| ApiError::bad_request("invalid_parameter", e.to_string()))?;
     let mut place = None;
-    let mut pose = vec![f64::NAN; pose_fields.len()];
-    let mut seen = HashSet::new();
-    for (k, v) in pairs {
-        if !seen.insert(k.clone()) {
-            return Err(ApiError::invalid_parameter(&k, "given more than once"));
-        }
-        if k == "place" {
-            if v.len() > MAX_PLACE_LEN {
-                return Err(ApiError::invalid_parameter(
-                    "place",
-                    format!("longer than {MAX_PLACE_LEN} bytes"),
-                ));
-            }
-            place = Some(v);
-        } else if let Some(i) = pose_fields.iter().position(|f| *f == k) {
-            let x: f64 = v
-                .trim()
-                .parse()
-                .ok()
-                .filter(|x: &f64| x.is_finite())
-                .ok_or_else(|| {
-                    ApiError::invalid_parameter(&k, format!("`{v}` is not a finite number"))
-                })?;
-            pose[i] = x;
+    let mut pose = Vec::new();
+    for (k, v) in &pairs {
+        if k != "place" {
+            pose.push((k.as_str(), v.as_str()));
+        } else if place.is_some() {
+            return Err(ApiError::invalid_parameter(k, "given more than once"));
+        } else if v.len() > MAX_PLACE_LEN {
+            return Err(ApiError::invalid_parameter(
+                "place",
+                format!("longer than {MAX_PLACE_LEN} bytes"),
+            ));
         } else {
+            place = Some(v.clone());
+        }
+    }
+    let pose = pose_row(pose_fields, pose).map_err(|e| match &e {
+        PoseError::Unknown { field, .. } => {
             let known = if pose_fields.is_empty() {
                 "`place` (this map has no pose fields)".to_owned()
             } else {
                 format!("`place` and the pose fields `{}`", pose_fields.join("`, `"))
             };
-            return Err(ApiError::invalid_parameter(
-                &k,
-                format!("unknown parameter; accepted: {known}"),
-            ));
+            ApiError::invalid_parameter(field, format!("unknown parameter; accepted: {known}"))
         }
-    }
-    let pose = if pose.iter().any(|v| v.is_finite()) {
-        pose
-    } else {
-        Vec::new()
-    };
+        e => ApiError::invalid_parameter(e.field(), e.to_string()),
+    })?;
     Ok((place.unwrap_or_default(), pose))
 }
 
