@@ -31,9 +31,20 @@ pub const MAX_ID_LEN: usize = 255;
 pub const MAX_PLACE_LEN: usize = 1024;
 /// Most images one page of `GET /images` lists.
 pub const MAX_PAGE: usize = 1000;
+/// Images a page of `GET /images` lists when the request does not say.
+pub const DEFAULT_PAGE: usize = 100;
 
-/// A new image's id is 1 to 255 characters among letters, digits and
-/// `. _ ~ / -` (a slash is sent as `%2F`), not starting with `/`. (The
+/// The rule a new image's id follows, as the API document and the errors
+/// say it.
+pub fn id_rule() -> String {
+    format!(
+        "1 to {MAX_ID_LEN} characters among letters, digits and `. _ ~ / -`, not starting \
+         with `/`"
+    )
+}
+
+/// A new image's id follows [`id_rule`]: 1 to [`MAX_ID_LEN`] characters
+/// among letters, digits and `. _ ~ / -`, not starting with `/`. (The
 /// images of a map file keep their names from its image list, whatever
 /// they are, and are addressed by them.)
 pub fn check_id(id: &str) -> Result<(), ApiError> {
@@ -48,10 +59,7 @@ pub fn check_id(id: &str) -> Result<(), ApiError> {
     } else {
         Err(ApiError::bad_request(
             "invalid_id",
-            format!(
-                "an image id is 1 to {MAX_ID_LEN} characters among letters, digits and `. _ ~ / -`, \
-                 not starting with `/`"
-            ),
+            format!("an image id is {}", id_rule()),
         ))
     }
 }
@@ -248,6 +256,7 @@ pub struct Written {
 #[into_params(parameter_in = Query)]
 pub struct PutParams {
     /// Place label (at most 1024 bytes).
+    // utoipa takes only a literal here; a test holds it to MAX_PLACE_LEN
     #[param(max_length = 1024)]
     pub place: Option<String>,
 }
@@ -298,7 +307,7 @@ fn put_fields(query: Option<&str>, pose_fields: &[String]) -> Result<(String, Ve
     path = "/images/{id}",
     tag = "images",
     params(
-        ("id" = String, Path, description = "The image's id (its name in the map): 1 to 255 characters among letters, digits and `. _ ~ / -`, not starting with `/`."),
+        ("id" = String, Path, description = format!("The image's id (its name in the map): {}.", id_rule())),
         PutParams,
     ),
     request_body(
@@ -424,6 +433,8 @@ pub struct ListParams {
     #[param(value_type = Option<u32>, minimum = 0)]
     pub offset: Option<String>,
     /// Images per page, 1 to 1000 (default 100).
+    // utoipa takes only literals here; a test holds them to MAX_PAGE and
+    // DEFAULT_PAGE
     #[param(value_type = Option<u32>, minimum = 1, maximum = 1000)]
     pub limit: Option<String>,
 }
@@ -482,7 +493,7 @@ pub async fn list_images(
     };
     let limit = match &params.limit {
         Some(v) => whole("limit", v, 1..=MAX_PAGE)?,
-        None => 100,
+        None => DEFAULT_PAGE,
     };
     let s = state.localizer()?.map.snapshot();
     let images = s

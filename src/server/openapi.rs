@@ -201,4 +201,49 @@ mod tests {
             );
         }
     }
+
+    /// A parameter of an operation in the served document.
+    fn parameter(path: &str, method: &str, name: &str) -> serde_json::Value {
+        let v: serde_json::Value = serde_json::from_str(json()).unwrap();
+        v["paths"][path][method]["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap_or_else(|| panic!("{method} {path}: no parameter {name}"))
+            .clone()
+    }
+
+    // utoipa 6 takes only literals for `maximum`, `minimum` and `max_length`;
+    // these hold the documented limits to the constants the handlers check.
+    #[test]
+    fn documented_limits_are_the_handlers_limits() {
+        use super::super::images::{DEFAULT_PAGE, MAX_PAGE, MAX_PLACE_LEN, id_rule};
+        use super::super::thumbnails::{DEFAULT_SIZE, MAX_SIZE, MIN_SIZE};
+
+        let place = parameter("/images/{id}", "put", "place");
+        assert_eq!(place["schema"]["maxLength"], MAX_PLACE_LEN);
+        let said = place["description"].as_str().unwrap();
+        assert!(
+            said.contains(&format!("at most {MAX_PLACE_LEN} bytes")),
+            "{said}"
+        );
+
+        let id = parameter("/images/{id}", "put", "id");
+        assert!(id["description"].as_str().unwrap().contains(&id_rule()));
+
+        let limit = parameter("/images", "get", "limit");
+        assert_eq!(limit["schema"]["minimum"], 1);
+        assert_eq!(limit["schema"]["maximum"], MAX_PAGE);
+        let said = limit["description"].as_str().unwrap();
+        let range = format!("1 to {MAX_PAGE} (default {DEFAULT_PAGE})");
+        assert!(said.contains(&range), "{said}");
+
+        let size = parameter("/images/{id}/thumbnail", "get", "size");
+        assert_eq!(size["schema"]["minimum"], MIN_SIZE);
+        assert_eq!(size["schema"]["maximum"], MAX_SIZE);
+        let said = size["description"].as_str().unwrap();
+        let range = format!("{MIN_SIZE} to {MAX_SIZE} (default {DEFAULT_SIZE})");
+        assert!(said.contains(&range), "{said}");
+    }
 }
