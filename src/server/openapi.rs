@@ -13,7 +13,7 @@ use crate::report::{
     MapIdentity, RacePoint, RaceTrace, RuleReport, SequenceAnswer, Timings,
 };
 use crate::search::StopInfo;
-use crate::search::stop::{RULES, rule_names};
+use crate::search::stop::{GENERIC_PARAMETER, Parameter, RULES, rule_names};
 use std::sync::LazyLock;
 use utoipa::OpenApi;
 use utoipa::openapi::path::ParameterIn;
@@ -143,6 +143,61 @@ fn describe_rules(doc: &mut utoipa::openapi::OpenApi) {
                     .enum_values(Some(rule_names()))
                     .into(),
             );
+        } else if p.parameter_in == ParameterIn::Query {
+            describe_rule_parameter(p);
+        }
+    }
+}
+
+/// A rule parameter of `/localize` (the generic one, or one a registry rule
+/// names its parameter): what it means for each rule that takes it, and,
+/// where those rules agree, its range.
+fn describe_rule_parameter(p: &mut utoipa::openapi::path::Parameter) {
+    use utoipa::openapi::{RefOr, Schema};
+    let takers: Vec<(&str, Parameter)> = RULES
+        .iter()
+        .filter_map(|r| r.parameter.map(|q| (r.name, q)))
+        .filter(|(_, q)| q.name == p.name)
+        .collect();
+    if takers.is_empty() {
+        return;
+    }
+    let uses: Vec<String> = takers
+        .iter()
+        .map(|(rule, q)| format!("`{rule}`: {}; {}", q.meaning, q.range.describe()))
+        .collect();
+    let head = if p.name == GENERIC_PARAMETER {
+        "The parameter of any rule that takes one (its generic name); the own name of the \
+         parameter of"
+    } else {
+        "The parameter of"
+    };
+    p.description = Some(format!("{head}\n\n- {}", uses.join("\n- ")));
+    let range = takers[0].1.range;
+    if p.name == GENERIC_PARAMETER || takers.iter().any(|(_, q)| q.range != range) {
+        return;
+    }
+    let Some(RefOr::T(Schema::Object(o))) = p.schema.as_mut() else {
+        return;
+    };
+    let number = |v: f64| {
+        if v.fract() == 0.0 {
+            utoipa::Number::Int(v as isize)
+        } else {
+            utoipa::Number::Float(v)
+        }
+    };
+    let (lo, lo_out, hi, hi_out) = range.bounds();
+    if lo_out {
+        o.exclusive_minimum = Some(number(lo));
+    } else {
+        o.minimum = Some(number(lo));
+    }
+    if let Some(hi) = hi {
+        if hi_out {
+            o.exclusive_maximum = Some(number(hi));
+        } else {
+            o.maximum = Some(number(hi));
         }
     }
 }
@@ -187,14 +242,11 @@ mod tests {
             .map(|v| v.as_str().unwrap())
             .collect();
         assert_eq!(listed, rule_names());
-        for name in [
-            "top_n",
-            "threshold",
-            "delta",
-            "fraction",
-            "seed",
-            "min_score",
-        ] {
+        let rule_parameters = RULES.iter().filter_map(|r| r.parameter.map(|p| p.name));
+        for name in ["top_n", GENERIC_PARAMETER, "seed", "min_score"]
+            .into_iter()
+            .chain(rule_parameters)
+        {
             assert!(
                 params.iter().any(|p| p["name"] == name),
                 "{name} undocumented"
