@@ -360,4 +360,4 @@ impl LiveMap {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

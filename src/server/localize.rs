@@ -105,16 +105,17 @@ pub struct Near {
 }
 
 impl Near {
-    /// The map images within the radius, given their positions.
-    pub fn images(&self, positions: &[[f64; 2]]) -> Vec<u32> {
-        positions
-            .iter()
-            .enumerate()
-            .filter(|(_, p)| {
-                ((p[0] - self.x).powi(2) + (p[1] - self.y).powi(2)).sqrt() <= self.radius
-            })
-            .map(|(j, _)| j as u32)
-            .collect()
+    /// The images of `map` within the radius (read in place: no list of
+    /// every image's position is made); `None` when the map has no poses
+    /// with fields x and y.
+    pub fn images(&self, map: &dyn MapRead) -> Option<Vec<u32>> {
+        let mut within = Vec::new();
+        map.each_position(&mut |j, [x, y]| {
+            if ((x - self.x).powi(2) + (y - self.y).powi(2)).sqrt() <= self.radius {
+                within.push(j);
+            }
+        })
+        .then_some(within)
     }
 }
 
@@ -565,12 +566,9 @@ pub async fn localize(
     let model = state.config.sequence.model();
     let snapshot = localizer.map.snapshot();
     let allowed = match near {
-        Some(n) => {
-            let positions = snapshot.positions().ok_or_else(|| {
-                ApiError::invalid_parameter("near", "the map has no poses with fields x and y")
-            })?;
-            Some(n.images(&positions))
-        }
+        Some(n) => Some(n.images(&*snapshot).ok_or_else(|| {
+            ApiError::invalid_parameter("near", "the map has no poses with fields x and y")
+        })?),
         None => None,
     };
     let images = snapshot.id_range();
@@ -728,6 +726,36 @@ mod tests {
         let e = parse(q).unwrap_err();
         assert_eq!(e.status, 400, "{q}");
         (e.code, e.message)
+    }
+
+    #[test]
+    fn near_reads_the_map_positions_added_images_included() {
+        let s = crate::live::tests::posed_snapshot();
+        let near = |x, y, radius| Near { x, y, radius }.images(&s).unwrap();
+        assert_eq!(near(6.0, 7.0, 1.5), [2, 3]);
+        assert_eq!(near(7.0, 8.0, 0.0), [3]);
+        assert_eq!(near(1.0, 2.0, 0.5), [0]);
+        assert!(near(100.0, 0.0, 1.0).is_empty());
+        let unposed = crate::live::Snapshot::new(s.base().clone());
+        let none = crate::index::MapBuilder::new(4).build("t", "v", None);
+        assert!(
+            Near {
+                x: 0.0,
+                y: 0.0,
+                radius: 1.0
+            }
+            .images(&none)
+            .is_none()
+        );
+        assert!(
+            Near {
+                x: 0.0,
+                y: 0.0,
+                radius: 1.0
+            }
+            .images(&unposed)
+            .is_some()
+        );
     }
 
     #[test]
