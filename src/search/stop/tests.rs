@@ -318,35 +318,43 @@ fn verified_stop(m: f64, stream: &[u32], check: &mut FakeCheck) -> Option<usize>
 }
 
 #[test]
-fn verified_stops_once_a_stable_leader_has_enough_inliers() {
+fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     let s = [0u32; 200];
     let mut c = FakeCheck {
         inliers: 12,
         calls: 0,
     };
-    // the leader takes the lead at feature 1 and is checked once it has held
-    // it for STABLE more features
-    assert_eq!(verified_stop(12.0, &s, &mut c), Some(verified::STABLE + 1));
+    // the first check offered verifies the leader
+    assert_eq!(verified_stop(12.0, &s, &mut c), Some(1));
     assert_eq!(c.calls, 1);
-    // too few inliers: checked every EVERY features, never stops
+    // too few inliers: checked at every offer, never stops
     let mut c = FakeCheck {
         inliers: 12,
         calls: 0,
     };
     assert_eq!(verified_stop(13.0, &s, &mut c), None);
-    let expected = (200 - verified::STABLE - 1) / verified::EVERY + 1;
-    assert_eq!(c.calls, expected);
-    // a leader without inliers waits RECHECK features between checks
+    assert_eq!(c.calls, 200);
+    // a leader without inliers never stops the search
     let s = [1u32; 200];
     let mut c = FakeCheck {
         inliers: 50,
         calls: 0,
     };
     assert_eq!(verified_stop(8.0, &s, &mut c), None);
-    assert_eq!(
-        c.calls,
-        (200 - verified::STABLE - 1) / verified::RECHECK + 1
-    );
+    // the same leader on the same votes is not checked twice
+    let map = one_word_per_image();
+    let view = map.view();
+    let mut voter = Voter::new(&view);
+    let mut rule = spec("verified", 13.0).build(&RuleContext::default());
+    let mut c = FakeCheck {
+        inliers: 12,
+        calls: 0,
+    };
+    voter.vote(0);
+    for _ in 0..3 {
+        assert!(rule.check_with(&voter, &[(0, 0)], Some(&mut c)).is_none());
+    }
+    assert_eq!(c.calls, 1);
     // without a check the rule never stops
     let map = one_word_per_image();
     let view = map.view();

@@ -8,9 +8,10 @@
 //!
 //! A check costs far more than a vote, so the search offers one only at the
 //! end of a batch (a tile of streaming extraction: stopping inside a tile
-//! saves no extraction), and the leader is checked only when it has held the
-//! lead for [`STABLE`] features, at most once every [`EVERY`] features; a
-//! leader that failed is checked again only after [`RECHECK`] more features.
+//! saves no extraction), and the rule takes every check offered: a tile's
+//! extraction costs more than a check, so a leader left unchecked at a tile's
+//! end would cost a whole tile more. A leader is not checked twice on the
+//! same votes.
 
 use super::{Grid, LeaderCheck, Parameter, Range, RuleInfo, StopRule, VoteStats};
 
@@ -29,26 +30,17 @@ pub const INFO: RuleInfo = RuleInfo {
     make: |m, _| {
         Ok(Box::new(Verified {
             min_inliers: m as usize,
-            leader: None,
-            next_check: 0,
+            checked: None,
             inliers: None,
         }))
     },
 };
 
-/// Features the leader must have held the lead before it is checked.
-pub const STABLE: usize = 16;
-/// Features between two checks.
-pub const EVERY: usize = 32;
-/// Features before a leader that failed is checked again.
-pub const RECHECK: usize = 64;
-
 struct Verified {
     min_inliers: usize,
-    leader: Option<u32>,
-    /// Feature count from which the leader may be checked.
-    next_check: usize,
-    /// Inliers of the leader's last check (none since it took the lead).
+    /// The leader and the feature count of the last check.
+    checked: Option<(u32, usize)>,
+    /// Inliers of the last check.
     inliers: Option<usize>,
 }
 
@@ -64,29 +56,23 @@ impl StopRule for Verified {
         leader_check: Option<&mut dyn LeaderCheck>,
     ) -> Option<String> {
         let t = voter.tally();
-        if t.leader != self.leader {
-            self.leader = t.leader;
-            self.next_check = t.features + STABLE;
-            self.inliers = None;
-        }
-        let leader = self.leader?;
+        let leader = t.leader?;
         let checker = leader_check?;
-        if t.features < self.next_check {
+        if self.checked == Some((leader, t.features)) {
             return None;
         }
         let inliers = checker.inliers(leader, voted);
+        self.checked = Some((leader, t.features));
         self.inliers = Some(inliers);
-        if inliers >= self.min_inliers {
-            return Some(format!(
+        (inliers >= self.min_inliers).then(|| {
+            format!(
                 "leader {leader} verified: {inliers} inliers ≥ {}",
                 self.min_inliers
-            ));
-        }
-        self.next_check = t.features + if inliers > 0 { EVERY } else { RECHECK };
-        None
+            )
+        })
     }
 
-    /// The leader's inliers at its last check, against m.
+    /// The inliers of the last check, against m.
     fn statistic(&self, _: &dyn VoteStats) -> Option<(f64, f64)> {
         self.inliers.map(|i| (i as f64, self.min_inliers as f64))
     }
