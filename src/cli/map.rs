@@ -212,3 +212,27 @@ fn build(a: BuildArgs) -> anyhow::Result<()> {
     );
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::pose_values;
+
+    #[test]
+    fn pose_arguments() {
+        let fields = vec!["x".to_owned(), "y".to_owned()];
+        let args = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let pose = pose_values(&args(&["y=2"]), &fields).unwrap();
+        assert!(pose[0].is_nan());
+        assert_eq!(pose[1], 2.0);
+        assert!(pose_values(&[], &fields).unwrap().is_empty());
+        for (bad, says) in [
+            (&["x"][..], "FIELD=VALUE"),
+            (&["z=1"], "[x, y]"),
+            (&["x=1", "x=2"], "more than once"),
+            (&["x=inf"], "finite"),
+        ] {
+            let e = pose_values(&args(bad), &fields).unwrap_err().to_string();
+            assert!(e.contains(says), "{bad:?}: {e}");
+        }
+    }
+}
