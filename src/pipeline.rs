@@ -479,7 +479,20 @@ impl Localizer {
         bytes: &[u8],
         options: &SearchOptions,
     ) -> Result<Localization, FeatureError> {
-        self.localize_tiled(bytes, options, self.tiles, self.verify.enabled)
+        let grid = self.grid_for(&options.rule, None);
+        self.localize_tiled(bytes, options, grid, self.verify.enabled)
+    }
+
+    /// The tile grid a query is extracted in: the one `asked` for, else the
+    /// configured grid when the rule may stop early, else the whole image (a
+    /// search that reads every feature gains nothing from tiles and would pay
+    /// their overlap).
+    pub fn grid_for(&self, rule: &search::RuleSpec, asked: Option<TileGrid>) -> TileGrid {
+        match asked {
+            Some(grid) => grid,
+            None if rule.info().stops_early => self.tiles,
+            None => TileGrid::WHOLE,
+        }
     }
 
     /// [`Localizer::localize`] with another tile grid than the configured

@@ -176,15 +176,16 @@ impl LocalizeParams {
         Ok(o)
     }
 
-    /// The tile grid asked for, or `default`.
-    pub fn tiles(&self, default: TileGrid) -> Result<TileGrid, ApiError> {
-        match &self.tiles {
-            None => Ok(default),
-            Some(v) => v
-                .trim()
-                .parse()
-                .map_err(|e: String| ApiError::invalid_parameter("tiles", e)),
-        }
+    /// The tile grid asked for, if any.
+    pub fn tiles(&self) -> Result<Option<TileGrid>, ApiError> {
+        self.tiles
+            .as_deref()
+            .map(|v| {
+                v.trim()
+                    .parse()
+                    .map_err(|e: String| ApiError::invalid_parameter("tiles", e))
+            })
+            .transpose()
     }
 
     /// The sequence named, checked.
@@ -559,7 +560,7 @@ pub async fn localize(
         d.options.min_features = q.min_features;
     }
     let mut options = params.options(&defaults)?;
-    let tiles = params.tiles(localizer.tiles)?;
+    let tiles = localizer.grid_for(&options.rule, params.tiles()?);
     let verify = params.verify(state.config.verify.enabled)?;
     let tracing = params.tracing()?;
     options.deadline = Some(deadline);

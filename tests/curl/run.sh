@@ -191,6 +191,10 @@ status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/loc
 check "tiles=3x2+16: the full search extracts all 6 tiles" jqt --arg s "$status" '
   $s == "200" and .tiles == {"extracted": 6, "total": 6, "grid": "3x2+16"}
   and .features.extracted == .features.total and .features.used == .features.total' "$B"
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&seed=3")
+check "rule=none without tiles= extracts the image whole" jqt --arg s "$status" '
+  $s == "200" and .tiles == {"extracted": 1, "total": 1, "grid": "1x1+0"}
+  and .features.used == .features.total' "$B"
 for bad in "tiles=0x2" "rule=none&threshold=2" "rule=peak-mean&inliers=12" "rule=verified&inliers=3"; do
   status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?$bad")
   check "$bad is 400 invalid_parameter ($(jq -r .error.message "$B"))" \

@@ -46,6 +46,7 @@ pub const INFO: RuleInfo = RuleInfo {
     }),
     grid: Grid::Values(&[0.1, 0.05, 0.01]),
     about: "stop when the leader wins with probability ≥ 1 − δ (Bernstein–Serfling, anytime)",
+    stops_early: true,
     geometric: false,
     whole_histogram: false,
     make: |d, _| Ok(Box::new(Confident(d))),

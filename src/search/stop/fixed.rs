@@ -15,6 +15,7 @@ pub const INFO: RuleInfo = RuleInfo {
     }),
     grid: Grid::Values(&[0.3, 0.5, 0.7]),
     about: "stop after a fixed fraction f of the features",
+    stops_early: true,
     geometric: false,
     whole_histogram: false,
     make: |f, _| Ok(Box::new(Fixed(f))),

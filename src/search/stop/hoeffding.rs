@@ -15,6 +15,7 @@ pub const INFO: RuleInfo = RuleInfo {
     }),
     grid: Grid::Values(&[0.5, 0.25, 0.1, 0.05, 0.01]),
     about: "stop when the top-2 gap of mean votes ≥ √(2·ln(2/δ)/t)",
+    stops_early: true,
     geometric: false,
     whole_histogram: false,
     make: |d, _| Ok(Box::new(Hoeffding(d))),

@@ -26,6 +26,7 @@ pub const INFO: RuleInfo = RuleInfo {
     parameter: None,
     grid: Grid::Single,
     about: "stop when the remaining features cannot change the top-n answer",
+    stops_early: true,
     geometric: false,
     whole_histogram: false,
     make: |_, ctx: &RuleContext| {

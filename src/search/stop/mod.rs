@@ -172,6 +172,10 @@ pub struct RuleInfo {
     pub about: &'static str,
     /// How the evaluation sweeps it.
     pub grid: Grid,
+    /// Whether the rule can end a search before its last feature (`none`
+    /// cannot: a query searched with it is best extracted whole, since tiles
+    /// only pay for themselves when the search may stop).
+    pub stops_early: bool,
     /// Whether the rule verifies candidates geometrically (it needs a
     /// [`LeaderCheck`], and its answers are re-ranked by verification).
     pub geometric: bool,

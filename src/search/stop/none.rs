@@ -8,6 +8,7 @@ pub const INFO: RuleInfo = RuleInfo {
     parameter: None,
     grid: Grid::Single,
     about: "full bag-of-words: quantize every feature",
+    stops_early: false,
     geometric: false,
     whole_histogram: false,
     make: |_, _| Ok(Box::new(NoStop)),

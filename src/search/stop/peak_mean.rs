@@ -22,6 +22,7 @@ pub const INFO: RuleInfo = RuleInfo {
         whole: false,
     },
     about: "rule 1: stop when max(h) − mean(h) > T",
+    stops_early: true,
     geometric: false,
     whole_histogram: false,
     make: |t, _| Ok(Box::new(PeakMean(t))),

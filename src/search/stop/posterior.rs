@@ -29,6 +29,7 @@ pub const INFO: RuleInfo = RuleInfo {
     }),
     grid: Grid::Values(&[0.7, 0.5, 0.1]),
     about: "stop when the posterior of the leader's place given the prior (a sequence's prediction, else uniform) and the votes is ≥ 1 − ε",
+    stops_early: true,
     geometric: false,
     whole_histogram: true,
     make: |e, ctx: &RuleContext| {

@@ -17,6 +17,7 @@ pub const INFO: RuleInfo = RuleInfo {
         whole: false,
     },
     about: "rule 2: stop when (max(h) − mean(h)) / mean(h) > T",
+    stops_early: true,
     geometric: false,
     whole_histogram: false,
     make: |t, _| Ok(Box::new(Relative(t))),

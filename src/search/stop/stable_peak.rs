@@ -18,6 +18,7 @@ pub const INFO: RuleInfo = RuleInfo {
         whole: true,
     },
     about: "rule 3: stop when the peak has not changed for T features",
+    stops_early: true,
     geometric: false,
     whole_histogram: false,
     make: |t, _| {

@@ -25,6 +25,7 @@ pub const INFO: RuleInfo = RuleInfo {
     }),
     grid: Grid::Values(&[8.0, 12.0, 16.0, 24.0]),
     about: "stop when the leader is geometrically verified with at least m inliers",
+    stops_early: true,
     geometric: true,
     whole_histogram: false,
     make: |m, _| {
