@@ -304,6 +304,45 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
     assert!(message.contains("422"), "{message}");
     screenshot(&client, 390, 900, "phone-error.png").await;
 
+    // a map image as the query: fetched at the side the server downscales
+    // queries to (GET /map), within the thumbnail's largest size
+    let map = get(address, "/map").await;
+    let map: serde_json::Value =
+        serde_json::from_str(map.split("\r\n\r\n").nth(1).unwrap()).unwrap();
+    let side = map["query_extract"]["max_side"].as_u64().unwrap();
+    let side = if side == 0 {
+        u64::from(bowloc::server::thumbnails::MAX_SIZE)
+    } else {
+        side.min(u64::from(bowloc::server::thumbnails::MAX_SIZE))
+    };
+    js(
+        &client,
+        "document.getElementById('map-image').value = '4'; return null",
+    )
+    .await;
+    click(&client, "use-map-image").await;
+    wait_until(
+        "the map image as the query",
+        Duration::from_secs(15),
+        || async { text(&client, "status").await.contains("map image 4") },
+    )
+    .await;
+    let fetched = js(
+        &client,
+        "return performance.getEntriesByType('resource').map((e) => e.name) \
+         .filter((n) => n.includes('/images/4/thumbnail'))",
+    )
+    .await;
+    let wanted = format!("/images/4/thumbnail?size={side}");
+    assert!(
+        fetched
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|n| n.as_str().unwrap().ends_with(&wanted)),
+        "{fetched}"
+    );
+
     client.close().await.unwrap();
     let _ = stop.send(());
     server.await.unwrap().unwrap();

@@ -5,6 +5,7 @@
 use anyhow::Context;
 use bowloc::dataset::image_list;
 use bowloc::geometry::packed::PACKED_BYTES;
+use bowloc::index::metadata::pose_row;
 use bowloc::index::{MapRead, Places};
 use bowloc::live::{Applied, Change, LiveMap, NewImage, now_ms};
 use bowloc::pipeline::Localizer;
@@ -76,25 +77,16 @@ fn open_live(map: &std::path::Path) -> anyhow::Result<LiveMap> {
     Ok(live)
 }
 
+/// The pose row of `--pose FIELD=VALUE` arguments.
 fn pose_values(given: &[String], fields: &[String]) -> anyhow::Result<Vec<f64>> {
-    let mut pose = vec![f64::NAN; fields.len()];
-    for g in given {
-        let (k, v) = g
-            .split_once('=')
-            .ok_or_else(|| anyhow::anyhow!("--pose {g}: expected FIELD=VALUE"))?;
-        let i = fields.iter().position(|f| f == k).ok_or_else(|| {
-            anyhow::anyhow!(
-                "--pose {g}: the map's pose fields are [{}]",
-                fields.join(", ")
-            )
-        })?;
-        pose[i] = v
-            .parse::<f64>()
-            .ok()
-            .filter(|x| x.is_finite())
-            .ok_or_else(|| anyhow::anyhow!("--pose {g}: `{v}` is not a finite number"))?;
-    }
-    Ok(if given.is_empty() { Vec::new() } else { pose })
+    let pairs = given
+        .iter()
+        .map(|g| {
+            g.split_once('=')
+                .ok_or_else(|| anyhow::anyhow!("--pose {g}: expected FIELD=VALUE"))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    pose_row(fields, pairs).map_err(|e| anyhow::anyhow!("--pose {}: {e}", e.field()))
 }
 
 fn print_change(id: &str, applied: Applied, generation: u64, features: Option<usize>) {
@@ -219,4 +211,28 @@ fn build(a: BuildArgs) -> anyhow::Result<()> {
         "map written"
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::pose_values;
+
+    #[test]
+    fn pose_arguments() {
+        let fields = vec!["x".to_owned(), "y".to_owned()];
+        let args = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let pose = pose_values(&args(&["y=2"]), &fields).unwrap();
+        assert!(pose[0].is_nan());
+        assert_eq!(pose[1], 2.0);
+        assert!(pose_values(&[], &fields).unwrap().is_empty());
+        for (bad, says) in [
+            (&["x"][..], "FIELD=VALUE"),
+            (&["z=1"], "[x, y]"),
+            (&["x=1", "x=2"], "more than once"),
+            (&["x=inf"], "finite"),
+        ] {
+            let e = pose_values(&args(bad), &fields).unwrap_err().to_string();
+            assert!(e.contains(says), "{bad:?}: {e}");
+        }
+    }
 }

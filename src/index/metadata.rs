@@ -119,6 +119,65 @@ pub fn pose_of<'a>(pose_fields: &'a [String], row: &[f64]) -> Option<HashMap<&'a
     (!known.is_empty()).then_some(known)
 }
 
+/// A pose value as text gives it (a query parameter, `--pose`, a places CSV
+/// cell): a finite number, blanks around it ignored.
+pub fn parse_pose_value(v: &str) -> Option<f64> {
+    v.trim().parse::<f64>().ok().filter(|x| x.is_finite())
+}
+
+/// Why a pose given field by field was refused; each names its field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PoseError {
+    #[error("given more than once")]
+    Repeated { field: String },
+    #[error("not a pose field of the map (its pose fields: [{}])", known.join(", "))]
+    Unknown { field: String, known: Vec<String> },
+    #[error("`{value}` is not a finite number")]
+    NotFinite { field: String, value: String },
+}
+
+impl PoseError {
+    /// The field the error is about.
+    pub fn field(&self) -> &str {
+        match self {
+            Self::Repeated { field }
+            | Self::Unknown { field, .. }
+            | Self::NotFinite { field, .. } => field,
+        }
+    }
+}
+
+/// An image's pose row from `(field, value)` pairs, in the order of the
+/// map's `pose_fields`: NaN (unknown) for a field not given, and empty when
+/// none is given. A field given twice, a name that is not a pose field, or a
+/// value [`parse_pose_value`] refuses is an error.
+pub fn pose_row<'a>(
+    pose_fields: &[String],
+    given: impl IntoIterator<Item = (&'a str, &'a str)>,
+) -> Result<Vec<f64>, PoseError> {
+    let mut row = vec![f64::NAN; pose_fields.len()];
+    let mut any = false;
+    for (field, value) in given {
+        let Some(i) = pose_fields.iter().position(|f| f == field) else {
+            return Err(PoseError::Unknown {
+                field: field.to_owned(),
+                known: pose_fields.to_vec(),
+            });
+        };
+        if !row[i].is_nan() {
+            return Err(PoseError::Repeated {
+                field: field.to_owned(),
+            });
+        }
+        row[i] = parse_pose_value(value).ok_or_else(|| PoseError::NotFinite {
+            field: field.to_owned(),
+            value: value.to_owned(),
+        })?;
+        any = true;
+    }
+    Ok(if any { row } else { Vec::new() })
+}
+
 /// Place labels and poses for map images, read from a CSV whose header is
 /// `image,place[,pose fields...]`; `image` is the image's name as listed in
 /// the map's image list, or its id.
@@ -156,9 +215,9 @@ impl Places {
                     if v.is_empty() {
                         Ok(f64::NAN)
                     } else {
-                        v.parse::<f64>().with_context(|| {
+                        parse_pose_value(v).with_context(|| {
                             format!(
-                                "{}: row {}: `{v}` is not a number",
+                                "{}: row {}: `{v}` is not a finite number",
                                 path.display(),
                                 line + 2
                             )
@@ -176,5 +235,28 @@ impl Places {
         self.rows
             .get(name)
             .or_else(|| self.rows.get(&id.to_string()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pose_rows() {
+        let fields = vec!["x".to_owned(), "y".to_owned()];
+        let row = pose_row(&fields, [("y", " 2.5 ")]).unwrap();
+        assert!(row[0].is_nan());
+        assert_eq!(row[1], 2.5);
+        assert_eq!(pose_row(&fields, []).unwrap(), Vec::<f64>::new());
+        let e = pose_row(&fields, [("x", "1"), ("x", "2")]).unwrap_err();
+        assert_eq!(e, PoseError::Repeated { field: "x".into() });
+        let e = pose_row(&fields, [("z", "1")]).unwrap_err();
+        assert_eq!(e.field(), "z");
+        assert!(e.to_string().contains("[x, y]"), "{e}");
+        for bad in ["abc", "inf", "NaN", ""] {
+            let e = pose_row(&fields, [("x", bad)]).unwrap_err();
+            assert!(matches!(e, PoseError::NotFinite { .. }), "{bad}");
+        }
     }
 }

@@ -85,23 +85,34 @@ pub trait MapRead: Send + Sync {
     fn id_range(&self) -> usize {
         self.meta().images
     }
-    /// Each image's position (pose fields `x` and `y`; NaN where unknown),
-    /// when the map has both fields.
-    fn positions(&self) -> Option<Vec<[f64; 2]>> {
-        let fields = &self.meta().pose_fields;
-        let x = fields.iter().position(|f| f == "x")?;
-        let y = fields.iter().position(|f| f == "y")?;
+    /// Calls `f` with each image's id and position (pose fields `x` and
+    /// `y`; NaN where unknown), in id order, without collecting them; false,
+    /// and no call, when the map lacks either field.
+    fn each_position(&self, f: &mut dyn FnMut(u32, [f64; 2])) -> bool {
+        let Some([x, y]) = xy_fields(self.meta()) else {
+            return false;
+        };
         let poses = self.view().poses;
-        let n = fields.len();
-        Some(
-            (0..self.meta().images)
-                .map(|i| {
-                    let at = |k: usize| poses.get(i * n + k).copied().unwrap_or(f64::NAN);
-                    [at(x), at(y)]
-                })
-                .collect(),
-        )
+        let n = self.meta().pose_fields.len();
+        for i in 0..self.meta().images {
+            let at = |k: usize| poses.get(i * n + k).copied().unwrap_or(f64::NAN);
+            f(i as u32, [at(x), at(y)]);
+        }
+        true
     }
+    /// Each image's position by id, as [`each_position`](Self::each_position)
+    /// gives them, when the map has both fields.
+    fn positions(&self) -> Option<Vec<[f64; 2]>> {
+        let mut out = Vec::with_capacity(self.id_range());
+        self.each_position(&mut |_, p| out.push(p)).then_some(out)
+    }
+}
+
+/// Where pose fields `x` and `y` stand among a map's pose fields, when it
+/// has both.
+pub fn xy_fields(meta: &MapMeta) -> Option<[usize; 2]> {
+    let at = |name: &str| meta.pose_fields.iter().position(|f| f == name);
+    Some([at("x")?, at("y")?])
 }
 
 impl MapRead for MapIndex {

@@ -361,4 +361,4 @@ impl LiveMap {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

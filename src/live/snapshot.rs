@@ -266,15 +266,17 @@ impl MapRead for Snapshot {
     }
 
     /// The file's positions, then the added images' (NaN where unknown).
-    fn positions(&self) -> Option<Vec<[f64; 2]>> {
-        let fields = &self.meta.pose_fields;
-        let x = fields.iter().position(|f| f == "x")?;
-        let y = fields.iter().position(|f| f == "y")?;
-        let mut out = self.base.positions()?;
-        out.extend(self.added.iter().map(|a| {
+    fn each_position(&self, f: &mut dyn FnMut(u32, [f64; 2])) -> bool {
+        let Some([x, y]) = crate::index::xy_fields(&self.meta) else {
+            return false;
+        };
+        if !self.base.each_position(f) {
+            return false;
+        }
+        for (k, a) in self.added.iter().enumerate() {
             let at = |k: usize| a.pose.get(k).copied().unwrap_or(f64::NAN);
-            [at(x), at(y)]
-        }));
-        Some(out)
+            f(self.overlay.first() + k as u32, [at(x), at(y)]);
+        }
+        true
     }
 }

@@ -433,3 +433,53 @@ fn an_empty_log_of_the_map_is_kept_and_its_torn_tail_cut() {
     let (_, opened) = LiveMap::open(&path, None, true, usize::MAX).unwrap();
     assert_eq!(opened.replayed, 1);
 }
+
+/// A map file of 3 images with pose fields `y, x` (image 1 has none), image
+/// 0 removed and one image added at (7, 8).
+pub(crate) fn posed_snapshot() -> Snapshot {
+    let mut b = MapBuilder::new(WORDS);
+    for j in 0..3 {
+        b.add(ImageWords::from_words(format!("f{j}"), &[1, 2, 3]));
+    }
+    let mut places = crate::index::Places {
+        pose_fields: vec!["y".into(), "x".into()],
+        ..Default::default()
+    };
+    places
+        .rows
+        .insert("f0".into(), (String::new(), vec![2.0, 1.0]));
+    places
+        .rows
+        .insert("f2".into(), (String::new(), vec![6.0, 5.0]));
+    let mut s = Snapshot::new(Arc::new(b.build("t", "v", Some(&places))));
+    let mut added = new_image("a", &[1, 2]);
+    added.pose = vec![8.0, 7.0];
+    for (g, change) in [Change::Remove { name: "f0".into() }, Change::Add(added)]
+        .into_iter()
+        .enumerate()
+    {
+        let record = Record {
+            generation: g as u64 + 1,
+            change,
+        };
+        s.apply(&record, usize::MAX).unwrap();
+    }
+    s
+}
+
+#[test]
+fn positions_run_over_the_id_range_with_added_images() {
+    let s = posed_snapshot();
+    let positions = s.positions().unwrap();
+    assert_eq!(positions.len(), s.id_range());
+    assert_eq!(positions[0], [1.0, 2.0]); // removed, still at its id
+    assert!(positions[1].iter().all(|v| v.is_nan()));
+    assert_eq!(positions[2], [5.0, 6.0]);
+    assert_eq!(positions[3], [7.0, 8.0]);
+    let mut ids = Vec::new();
+    assert!(s.each_position(&mut |j, _| ids.push(j)));
+    assert_eq!(ids, [0, 1, 2, 3]);
+    let plain = Snapshot::new(Arc::new(file_map(&scenario().file)));
+    assert!(plain.positions().is_none());
+    assert!(!plain.each_position(&mut |_, _| panic!("no positions")));
+}

@@ -11,6 +11,7 @@ use super::errors::{ApiError, ErrorBody};
 use super::localize::{ImageUpload, receive_image};
 use super::openapi::Binary;
 use crate::index::MapRead;
+use crate::index::metadata::{PoseError, pose_row};
 use crate::live::{Change, Compaction, NewImage, Snapshot, WriteError, now_ms};
 use axum::Json;
 use axum::extract::{Path, RawQuery, Request, State};
@@ -30,9 +31,20 @@ pub const MAX_ID_LEN: usize = 255;
 pub const MAX_PLACE_LEN: usize = 1024;
 /// Most images one page of `GET /images` lists.
 pub const MAX_PAGE: usize = 1000;
+/// Images a page of `GET /images` lists when the request does not say.
+pub const DEFAULT_PAGE: usize = 100;
 
-/// A new image's id is 1 to 255 characters among letters, digits and
-/// `. _ ~ / -` (a slash is sent as `%2F`), not starting with `/`. (The
+/// The rule a new image's id follows, as the API document and the errors
+/// say it.
+pub fn id_rule() -> String {
+    format!(
+        "1 to {MAX_ID_LEN} characters among letters, digits and `. _ ~ / -`, not starting \
+         with `/`"
+    )
+}
+
+/// A new image's id follows [`id_rule`]: 1 to [`MAX_ID_LEN`] characters
+/// among letters, digits and `. _ ~ / -`, not starting with `/`. (The
 /// images of a map file keep their names from its image list, whatever
 /// they are, and are addressed by them.)
 pub fn check_id(id: &str) -> Result<(), ApiError> {
@@ -47,10 +59,7 @@ pub fn check_id(id: &str) -> Result<(), ApiError> {
     } else {
         Err(ApiError::bad_request(
             "invalid_id",
-            format!(
-                "an image id is 1 to {MAX_ID_LEN} characters among letters, digits and `. _ ~ / -`, \
-                 not starting with `/`"
-            ),
+            format!("an image id is {}", id_rule()),
         ))
     }
 }
@@ -247,6 +256,7 @@ pub struct Written {
 #[into_params(parameter_in = Query)]
 pub struct PutParams {
     /// Place label (at most 1024 bytes).
+    // utoipa takes only a literal here; a test holds it to MAX_PLACE_LEN
     #[param(max_length = 1024)]
     pub place: Option<String>,
 }
@@ -256,47 +266,32 @@ fn put_fields(query: Option<&str>, pose_fields: &[String]) -> Result<(String, Ve
     let pairs: Vec<(String, String)> = serde_urlencoded::from_str(query.unwrap_or(""))
         .map_err(|e| ApiError::bad_request("invalid_parameter", e.to_string()))?;
     let mut place = None;
-    let mut pose = vec![f64::NAN; pose_fields.len()];
-    let mut seen = HashSet::new();
-    for (k, v) in pairs {
-        if !seen.insert(k.clone()) {
-            return Err(ApiError::invalid_parameter(&k, "given more than once"));
-        }
-        if k == "place" {
-            if v.len() > MAX_PLACE_LEN {
-                return Err(ApiError::invalid_parameter(
-                    "place",
-                    format!("longer than {MAX_PLACE_LEN} bytes"),
-                ));
-            }
-            place = Some(v);
-        } else if let Some(i) = pose_fields.iter().position(|f| *f == k) {
-            let x: f64 = v
-                .trim()
-                .parse()
-                .ok()
-                .filter(|x: &f64| x.is_finite())
-                .ok_or_else(|| {
-                    ApiError::invalid_parameter(&k, format!("`{v}` is not a finite number"))
-                })?;
-            pose[i] = x;
+    let mut pose = Vec::new();
+    for (k, v) in &pairs {
+        if k != "place" {
+            pose.push((k.as_str(), v.as_str()));
+        } else if place.is_some() {
+            return Err(ApiError::invalid_parameter(k, "given more than once"));
+        } else if v.len() > MAX_PLACE_LEN {
+            return Err(ApiError::invalid_parameter(
+                "place",
+                format!("longer than {MAX_PLACE_LEN} bytes"),
+            ));
         } else {
+            place = Some(v.clone());
+        }
+    }
+    let pose = pose_row(pose_fields, pose).map_err(|e| match &e {
+        PoseError::Unknown { field, .. } => {
             let known = if pose_fields.is_empty() {
                 "`place` (this map has no pose fields)".to_owned()
             } else {
                 format!("`place` and the pose fields `{}`", pose_fields.join("`, `"))
             };
-            return Err(ApiError::invalid_parameter(
-                &k,
-                format!("unknown parameter; accepted: {known}"),
-            ));
+            ApiError::invalid_parameter(field, format!("unknown parameter; accepted: {known}"))
         }
-    }
-    let pose = if pose.iter().any(|v| v.is_finite()) {
-        pose
-    } else {
-        Vec::new()
-    };
+        e => ApiError::invalid_parameter(e.field(), e.to_string()),
+    })?;
     Ok((place.unwrap_or_default(), pose))
 }
 
@@ -312,7 +307,7 @@ fn put_fields(query: Option<&str>, pose_fields: &[String]) -> Result<(String, Ve
     path = "/images/{id}",
     tag = "images",
     params(
-        ("id" = String, Path, description = "The image's id (its name in the map): 1 to 255 characters among letters, digits and `. _ ~ / -`, not starting with `/`."),
+        ("id" = String, Path, description = format!("The image's id (its name in the map): {}.", id_rule())),
         PutParams,
     ),
     request_body(
@@ -438,6 +433,8 @@ pub struct ListParams {
     #[param(value_type = Option<u32>, minimum = 0)]
     pub offset: Option<String>,
     /// Images per page, 1 to 1000 (default 100).
+    // utoipa takes only literals here; a test holds them to MAX_PAGE and
+    // DEFAULT_PAGE
     #[param(value_type = Option<u32>, minimum = 1, maximum = 1000)]
     pub limit: Option<String>,
 }
@@ -496,7 +493,7 @@ pub async fn list_images(
     };
     let limit = match &params.limit {
         Some(v) => whole("limit", v, 1..=MAX_PAGE)?,
-        None => 100,
+        None => DEFAULT_PAGE,
     };
     let s = state.localizer()?.map.snapshot();
     let images = s

@@ -35,21 +35,16 @@ pub struct LocalizeParams {
     /// configured one if it is the configured rule.
     #[param(value_type = Option<String>)]
     pub rule: Option<String>,
-    /// The rule's parameter: threshold T of peak-mean, relative and
-    /// stable-peak; also accepted for the parameter of any rule that takes one.
+    // The rule parameters (the generic one and each registry rule's) are
+    // described, with their ranges, from the registry in the API document.
     #[param(value_type = Option<f64>)]
     pub threshold: Option<String>,
-    /// Confidence δ of rules hoeffding and confident, in (0, 1).
     #[param(value_type = Option<f64>)]
     pub delta: Option<String>,
-    /// Fraction of features of rule fixed, in (0, 1].
     #[param(value_type = Option<f64>)]
     pub fraction: Option<String>,
-    /// Inliers m of rule verified, a whole number in 4..=1000.
-    #[param(value_type = Option<u32>, minimum = 4, maximum = 1000)]
+    #[param(value_type = Option<u32>)]
     pub inliers: Option<String>,
-    /// ε of rule posterior, in (0, 1): it stops once the leader's place holds
-    /// 1 − ε of the posterior.
     #[param(value_type = Option<f64>)]
     pub epsilon: Option<String>,
     /// Seed of the feature permutation (0 to 2^63−1, the API document's
@@ -110,16 +105,17 @@ pub struct Near {
 }
 
 impl Near {
-    /// The map images within the radius, given their positions.
-    pub fn images(&self, positions: &[[f64; 2]]) -> Vec<u32> {
-        positions
-            .iter()
-            .enumerate()
-            .filter(|(_, p)| {
-                ((p[0] - self.x).powi(2) + (p[1] - self.y).powi(2)).sqrt() <= self.radius
-            })
-            .map(|(j, _)| j as u32)
-            .collect()
+    /// The images of `map` within the radius (read in place: no list of
+    /// every image's position is made); `None` when the map has no poses
+    /// with fields x and y.
+    pub fn images(&self, map: &dyn MapRead) -> Option<Vec<u32>> {
+        let mut within = Vec::new();
+        map.each_position(&mut |j, [x, y]| {
+            if ((x - self.x).powi(2) + (y - self.y).powi(2)).sqrt() <= self.radius {
+                within.push(j);
+            }
+        })
+        .then_some(within)
     }
 }
 
@@ -235,14 +231,22 @@ impl LocalizeParams {
         Ok(Some(Near { x, y, radius }))
     }
 
+    /// The rule parameters as given, by name: [`GENERIC_PARAMETER`] and the
+    /// name of each registry rule's parameter (a test holds this list to the
+    /// registry, so a rule with a new parameter needs its field here).
+    fn rule_parameters(&self) -> [(&'static str, &Option<String>); 5] {
+        [
+            (GENERIC_PARAMETER, &self.threshold),
+            ("delta", &self.delta),
+            ("fraction", &self.fraction),
+            ("inliers", &self.inliers),
+            ("epsilon", &self.epsilon),
+        ]
+    }
+
     /// Whether the request names a rule or a rule parameter.
     pub fn names_a_rule(&self) -> bool {
-        self.rule.is_some()
-            || self.threshold.is_some()
-            || self.delta.is_some()
-            || self.fraction.is_some()
-            || self.inliers.is_some()
-            || self.epsilon.is_some()
+        self.rule.is_some() || self.rule_parameters().iter().any(|(_, v)| v.is_some())
     }
 
     /// Whether to verify, on top of the configured default.
@@ -274,13 +278,7 @@ impl LocalizeParams {
     /// The rule and its parameter, through the registry's one parser.
     fn rule(&self, default: &RuleSpec) -> Result<RuleSpec, ApiError> {
         let mut given = Vec::new();
-        for (name, value) in [
-            (GENERIC_PARAMETER, &self.threshold),
-            ("delta", &self.delta),
-            ("fraction", &self.fraction),
-            ("inliers", &self.inliers),
-            ("epsilon", &self.epsilon),
-        ] {
+        for (name, value) in self.rule_parameters() {
             if let Some(v) = value {
                 given.push((name, number(name, v)?));
             }
@@ -569,12 +567,9 @@ pub async fn localize(
     let model = state.config.sequence.model();
     let snapshot = localizer.map.snapshot();
     let allowed = match near {
-        Some(n) => {
-            let positions = snapshot.positions().ok_or_else(|| {
-                ApiError::invalid_parameter("near", "the map has no poses with fields x and y")
-            })?;
-            Some(n.images(&positions))
-        }
+        Some(n) => Some(n.images(&*snapshot).ok_or_else(|| {
+            ApiError::invalid_parameter("near", "the map has no poses with fields x and y")
+        })?),
         None => None,
     };
     let images = snapshot.id_range();
@@ -732,6 +727,65 @@ mod tests {
         let e = parse(q).unwrap_err();
         assert_eq!(e.status, 400, "{q}");
         (e.code, e.message)
+    }
+
+    #[test]
+    fn near_reads_the_map_positions_added_images_included() {
+        let s = crate::live::tests::posed_snapshot();
+        let near = |x, y, radius| Near { x, y, radius }.images(&s).unwrap();
+        assert_eq!(near(6.0, 7.0, 1.5), [2, 3]);
+        assert_eq!(near(7.0, 8.0, 0.0), [3]);
+        assert_eq!(near(1.0, 2.0, 0.5), [0]);
+        assert!(near(100.0, 0.0, 1.0).is_empty());
+        let unposed = crate::live::Snapshot::new(s.base().clone());
+        let none = crate::index::MapBuilder::new(4).build("t", "v", None);
+        assert!(
+            Near {
+                x: 0.0,
+                y: 0.0,
+                radius: 1.0
+            }
+            .images(&none)
+            .is_none()
+        );
+        assert!(
+            Near {
+                x: 0.0,
+                y: 0.0,
+                radius: 1.0
+            }
+            .images(&unposed)
+            .is_some()
+        );
+    }
+
+    #[test]
+    fn rule_parameters_are_the_registry_parameters() {
+        use crate::search::stop::RULES;
+        use std::collections::BTreeSet;
+        let mut registry: BTreeSet<&str> = RULES
+            .iter()
+            .filter_map(|r| r.parameter.map(|p| p.name))
+            .collect();
+        registry.insert(GENERIC_PARAMETER);
+        let listed: BTreeSet<&str> = LocalizeParams::default()
+            .rule_parameters()
+            .iter()
+            .map(|(name, _)| *name)
+            .collect();
+        assert_eq!(listed, registry);
+        // each name is the query parameter that fills its field
+        for name in registry {
+            let p = LocalizeParams::from_query(Some(&format!("{name}=0.5"))).unwrap();
+            let given: Vec<&str> = p
+                .rule_parameters()
+                .iter()
+                .filter(|(_, v)| v.is_some())
+                .map(|(n, _)| *n)
+                .collect();
+            assert_eq!(given, [name]);
+            assert!(p.names_a_rule(), "{name}");
+        }
     }
 
     #[test]

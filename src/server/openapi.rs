@@ -13,7 +13,7 @@ use crate::report::{
     MapIdentity, RacePoint, RaceTrace, RuleReport, SequenceAnswer, Timings,
 };
 use crate::search::StopInfo;
-use crate::search::stop::{RULES, rule_names};
+use crate::search::stop::{GENERIC_PARAMETER, Parameter, RULES, rule_names};
 use std::sync::LazyLock;
 use utoipa::OpenApi;
 use utoipa::openapi::path::ParameterIn;
@@ -143,6 +143,61 @@ fn describe_rules(doc: &mut utoipa::openapi::OpenApi) {
                     .enum_values(Some(rule_names()))
                     .into(),
             );
+        } else if p.parameter_in == ParameterIn::Query {
+            describe_rule_parameter(p);
+        }
+    }
+}
+
+/// A rule parameter of `/localize` (the generic one, or one a registry rule
+/// names its parameter): what it means for each rule that takes it, and,
+/// where those rules agree, its range.
+fn describe_rule_parameter(p: &mut utoipa::openapi::path::Parameter) {
+    use utoipa::openapi::{RefOr, Schema};
+    let takers: Vec<(&str, Parameter)> = RULES
+        .iter()
+        .filter_map(|r| r.parameter.map(|q| (r.name, q)))
+        .filter(|(_, q)| q.name == p.name)
+        .collect();
+    if takers.is_empty() {
+        return;
+    }
+    let uses: Vec<String> = takers
+        .iter()
+        .map(|(rule, q)| format!("`{rule}`: {}; {}", q.meaning, q.range.describe()))
+        .collect();
+    let head = if p.name == GENERIC_PARAMETER {
+        "The parameter of any rule that takes one (its generic name); the own name of the \
+         parameter of"
+    } else {
+        "The parameter of"
+    };
+    p.description = Some(format!("{head}\n\n- {}", uses.join("\n- ")));
+    let range = takers[0].1.range;
+    if p.name == GENERIC_PARAMETER || takers.iter().any(|(_, q)| q.range != range) {
+        return;
+    }
+    let Some(RefOr::T(Schema::Object(o))) = p.schema.as_mut() else {
+        return;
+    };
+    let number = |v: f64| {
+        if v.fract() == 0.0 {
+            utoipa::Number::Int(v as isize)
+        } else {
+            utoipa::Number::Float(v)
+        }
+    };
+    let (lo, lo_out, hi, hi_out) = range.bounds();
+    if lo_out {
+        o.exclusive_minimum = Some(number(lo));
+    } else {
+        o.minimum = Some(number(lo));
+    }
+    if let Some(hi) = hi {
+        if hi_out {
+            o.exclusive_maximum = Some(number(hi));
+        } else {
+            o.maximum = Some(number(hi));
         }
     }
 }
@@ -187,18 +242,60 @@ mod tests {
             .map(|v| v.as_str().unwrap())
             .collect();
         assert_eq!(listed, rule_names());
-        for name in [
-            "top_n",
-            "threshold",
-            "delta",
-            "fraction",
-            "seed",
-            "min_score",
-        ] {
+        let rule_parameters = RULES.iter().filter_map(|r| r.parameter.map(|p| p.name));
+        for name in ["top_n", GENERIC_PARAMETER, "seed", "min_score"]
+            .into_iter()
+            .chain(rule_parameters)
+        {
             assert!(
                 params.iter().any(|p| p["name"] == name),
                 "{name} undocumented"
             );
         }
+    }
+
+    /// A parameter of an operation in the served document.
+    fn parameter(path: &str, method: &str, name: &str) -> serde_json::Value {
+        let v: serde_json::Value = serde_json::from_str(json()).unwrap();
+        v["paths"][path][method]["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap_or_else(|| panic!("{method} {path}: no parameter {name}"))
+            .clone()
+    }
+
+    // utoipa 6 takes only literals for `maximum`, `minimum` and `max_length`;
+    // these hold the documented limits to the constants the handlers check.
+    #[test]
+    fn documented_limits_are_the_handlers_limits() {
+        use super::super::images::{DEFAULT_PAGE, MAX_PAGE, MAX_PLACE_LEN, id_rule};
+        use super::super::thumbnails::{DEFAULT_SIZE, MAX_SIZE, MIN_SIZE};
+
+        let place = parameter("/images/{id}", "put", "place");
+        assert_eq!(place["schema"]["maxLength"], MAX_PLACE_LEN);
+        let said = place["description"].as_str().unwrap();
+        assert!(
+            said.contains(&format!("at most {MAX_PLACE_LEN} bytes")),
+            "{said}"
+        );
+
+        let id = parameter("/images/{id}", "put", "id");
+        assert!(id["description"].as_str().unwrap().contains(&id_rule()));
+
+        let limit = parameter("/images", "get", "limit");
+        assert_eq!(limit["schema"]["minimum"], 1);
+        assert_eq!(limit["schema"]["maximum"], MAX_PAGE);
+        let said = limit["description"].as_str().unwrap();
+        let range = format!("1 to {MAX_PAGE} (default {DEFAULT_PAGE})");
+        assert!(said.contains(&range), "{said}");
+
+        let size = parameter("/images/{id}/thumbnail", "get", "size");
+        assert_eq!(size["schema"]["minimum"], MIN_SIZE);
+        assert_eq!(size["schema"]["maximum"], MAX_SIZE);
+        let said = size["description"].as_str().unwrap();
+        let range = format!("{MIN_SIZE} to {MAX_SIZE} (default {DEFAULT_SIZE})");
+        assert!(said.contains(&range), "{said}");
     }
 }

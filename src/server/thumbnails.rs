@@ -27,7 +27,8 @@ pub const DEFAULT_SIZE: u32 = 160;
 /// Largest `size`: the extraction's default frame, so a map image fetched
 /// at this size is what SIFT saw of it.
 pub const MAX_SIZE: u32 = 640;
-const MIN_SIZE: u32 = 16;
+/// Smallest `size`.
+pub const MIN_SIZE: u32 = 16;
 
 /// The most recently used thumbnails, by (map file fingerprint, image id, size).
 pub struct ThumbnailCache(Mutex<lru::LruCache<(u64, u32, u32), Bytes>>);
@@ -59,6 +60,8 @@ impl ThumbnailCache {
 pub struct ThumbnailParams {
     /// Longer side in pixels, 16 to 640 (default 160); a smaller image
     /// keeps its size.
+    // utoipa takes only literals here; a test holds them (and the numbers
+    // above) to MIN_SIZE, MAX_SIZE and DEFAULT_SIZE
     #[param(value_type = Option<u32>, minimum = 16, maximum = 640)]
     pub size: Option<String>,
 }

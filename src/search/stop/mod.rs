@@ -124,6 +124,17 @@ impl Range {
             Self::Fraction => "a number in (0, 1]".into(),
         }
     }
+
+    /// Smallest value and whether it is excluded, largest value (if any)
+    /// and whether it is excluded: the range as an API document states it.
+    pub fn bounds(self) -> (f64, bool, Option<f64>, bool) {
+        match self {
+            Self::NonNegative | Self::Count => (0.0, false, None, false),
+            Self::Whole { min, max } => (min as f64, false, Some(max as f64), false),
+            Self::Open01 => (0.0, true, Some(1.0), true),
+            Self::Fraction => (0.0, true, Some(1.0), false),
+        }
+    }
 }
 
 /// A rule's one parameter.

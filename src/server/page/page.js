@@ -8,6 +8,12 @@ const $ = (id) => document.getElementById(id);
 let queryBlob = null; // the image to send
 let queryName = "";
 let lastAnswer = null;
+// What the server says (GET /map, GET /openapi.json); null until it has.
+const server = {
+  extractSide: null, // longer side a query is downscaled to (0: kept)
+  thumbMin: null, // the thumbnail's `size` range
+  thumbMax: null,
+};
 
 const COLORS = {
   leader: "#1f6feb",
@@ -70,15 +76,20 @@ async function loadMapAndRules() {
       $("map-info").textContent =
         `Map “${id.name}”: ${id.images} images, ${id.words} visual words.`;
       $("map-image").max = String(Math.max(0, id.images - 1));
+      server.extractSide = m.query_extract.max_side;
     } else {
       $("map-info").textContent = `Map not available: ${await errorOf(r)}`;
     }
   } catch (e) {
     $("map-info").textContent = `Map not available: ${e.message}`;
   }
+  let doc;
   try {
-    const r = await fetch("/openapi.json");
-    const doc = await r.json();
+    doc = await (await fetch("/openapi.json")).json();
+  } catch (_) {
+    return; // the default rule still works; no map image as a query
+  }
+  try {
     const params = doc.paths["/localize"].post.parameters;
     const rule = params.find((p) => p.name === "rule");
     for (const name of rule.schema.enum) {
@@ -90,6 +101,14 @@ async function loadMapAndRules() {
     $("rule").title = rule.description;
   } catch (_) {
     // the default rule still works
+  }
+  try {
+    const params = doc.paths["/images/{id}/thumbnail"].get.parameters;
+    const size = params.find((p) => p.name === "size").schema;
+    server.thumbMin = size.minimum;
+    server.thumbMax = size.maximum;
+  } catch (_) {
+    // no map image as a query, no inlier lines
   }
 }
 
@@ -119,8 +138,15 @@ function wireInputs() {
       showError("Give a map image id: a whole number from 0.");
       return;
     }
-    // the map image at the size SIFT sees (640 px)
-    const r = await fetch(`/images/${id}/thumbnail?size=640`);
+    // the map image at the size SIFT sees of a query, as far as a thumbnail
+    // can be that large
+    const { extractSide, thumbMax } = server;
+    if (extractSide === null || thumbMax === null) {
+      showError("The map's settings are not known: reload the page once the map is loaded.");
+      return;
+    }
+    const size = extractSide > 0 ? Math.min(extractSide, thumbMax) : thumbMax;
+    const r = await fetch(`/images/${id}/thumbnail?size=${size}`);
     if (!r.ok) {
       showError(`Map image ${id}: ${await errorOf(r)}`);
       return;
@@ -294,7 +320,7 @@ async function drawMatches(answer, c) {
   canvas.dataset.lines = "0";
   const m = matchesOf(answer, c.id);
   const side = answer.trace.frame_side;
-  if (!m || side < 16 || side > 640) {
+  if (!m || !(side >= server.thumbMin && side <= server.thumbMax)) {
     box.hidden = true;
     return;
   }
