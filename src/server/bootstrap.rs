@@ -111,7 +111,6 @@ pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
     Ok(localizer)
 }
 
-/// `A is missing` or `A and B are missing`.
 /// The vocabulary and map, the map with its change log (replayed) when
 /// writes are configured or a log exists; otherwise read only, and no log
 /// is created.
@@ -138,12 +137,13 @@ fn open(config: &Config) -> anyhow::Result<Localizer> {
     if opened.reset {
         tracing::warn!(
             log = %log.display(),
-            "the change log held only changes the map file already has (a compaction was              interrupted); emptied"
+            "the change log held only changes the map file already has (a compaction was interrupted); emptied"
         );
     }
     Ok(localizer)
 }
 
+/// `A is missing` or `A and B are missing`.
 fn missing(config: &Config) -> String {
     let names: Vec<String> = [&config.files.vocabulary, &config.files.map]
         .into_iter()
