@@ -219,6 +219,15 @@ fn saved(dir: &Path, images: &[NewImage]) -> PathBuf {
     path
 }
 
+/// The scenario's file images saved as a map in a fresh folder (kept alive
+/// by the returned guard).
+fn scenario_saved() -> (Scenario, tempfile::TempDir, PathBuf) {
+    let s = scenario();
+    let dir = tempfile::tempdir().unwrap();
+    let path = saved(dir.path(), &s.file);
+    (s, dir, path)
+}
+
 fn names(live: &LiveMap) -> Vec<String> {
     let s = live.snapshot();
     s.ids().map(|id| s.image(id).name.to_owned()).collect()
@@ -226,9 +235,7 @@ fn names(live: &LiveMap) -> Vec<String> {
 
 #[test]
 fn changes_survive_a_restart_a_torn_tail_and_a_compaction() {
-    let s = scenario();
-    let dir = tempfile::tempdir().unwrap();
-    let path = saved(dir.path(), &s.file);
+    let (s, _dir, path) = scenario_saved();
     let (live, opened) = LiveMap::open(&path, None, true, usize::MAX).unwrap();
     assert_eq!(opened.replayed, 0);
     assert!(
@@ -291,9 +298,7 @@ fn changes_survive_a_restart_a_torn_tail_and_a_compaction() {
 
 #[test]
 fn a_crash_between_writing_the_compacted_map_and_emptying_the_log_loses_nothing() {
-    let s = scenario();
-    let dir = tempfile::tempdir().unwrap();
-    let path = saved(dir.path(), &s.file);
+    let (s, _dir, path) = scenario_saved();
     let (live, _) = LiveMap::open(&path, None, true, usize::MAX).unwrap();
     for change in &s.changes {
         live.apply(change.clone()).unwrap();
@@ -310,9 +315,7 @@ fn a_crash_between_writing_the_compacted_map_and_emptying_the_log_loses_nothing(
 
 #[test]
 fn a_log_of_another_map_is_refused() {
-    let s = scenario();
-    let dir = tempfile::tempdir().unwrap();
-    let path = saved(dir.path(), &s.file);
+    let (s, dir, path) = scenario_saved();
     let (live, _) = LiveMap::open(&path, None, true, usize::MAX).unwrap();
     live.apply(s.changes[0].clone()).unwrap();
     drop(live);
@@ -389,9 +392,7 @@ fn of_two_file_images_of_one_name_the_later_is_found() {
 
 #[test]
 fn a_corrupt_first_record_is_reported_though_nothing_is_replayed() {
-    let s = scenario();
-    let dir = tempfile::tempdir().unwrap();
-    let path = saved(dir.path(), &s.file);
+    let (s, _dir, path) = scenario_saved();
     let (live, _) = LiveMap::open(&path, None, true, usize::MAX).unwrap();
     for change in &s.changes[..3] {
         live.apply(change.clone()).unwrap();
@@ -411,9 +412,7 @@ fn a_corrupt_first_record_is_reported_though_nothing_is_replayed() {
 #[test]
 fn an_empty_log_of_the_map_is_kept_and_its_torn_tail_cut() {
     use std::os::unix::fs::MetadataExt;
-    let s = scenario();
-    let dir = tempfile::tempdir().unwrap();
-    let path = saved(dir.path(), &s.file);
+    let (s, _dir, path) = scenario_saved();
     let log = log::path_for(&path);
     drop(LiveMap::open(&path, None, true, usize::MAX).unwrap());
     let inode = std::fs::metadata(&log).unwrap().ino();
