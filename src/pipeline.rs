@@ -629,15 +629,18 @@ impl Localizer {
         })
     }
 
-    /// Read a file and answer it as a query.
+    /// Read a file and answer it as a query, extracted in the grid `tiles`
+    /// asks for, else as [`Localizer::grid_for`] chooses.
     pub fn localize_file(
         &self,
         path: &Path,
         options: &SearchOptions,
+        tiles: Option<TileGrid>,
     ) -> anyhow::Result<Localization> {
         let bytes =
             std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-        self.localize(&bytes, options)
+        let grid = self.grid_for(&options.rule, tiles);
+        self.localize_tiled(&bytes, options, grid, self.verify.enabled)
             .with_context(|| format!("{}", path.display()))
     }
 }

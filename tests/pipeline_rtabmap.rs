@@ -40,7 +40,7 @@ fn rtabmap_loop_recall_at_5_with_full_bow() {
     };
     let mut hits = 0;
     for (q, truth) in data.queries.iter().zip(&data.truth) {
-        let answer = localizer.localize_file(&q.path, &options).unwrap();
+        let answer = localizer.localize_file(&q.path, &options, None).unwrap();
         assert_eq!(answer.features.used, answer.features.total);
         if answer.candidates.iter().any(|c| truth.contains(&c.id)) {
             hits += 1;

@@ -95,7 +95,7 @@ fn verification_raises_recall_at_1_of_an_early_stopped_search() {
         ..Default::default()
     };
     let q = &data.queries[0];
-    let answer = localizer.localize_file(&q.path, &options).unwrap();
+    let answer = localizer.localize_file(&q.path, &options, None).unwrap();
     assert_eq!(answer.candidates.len(), 3);
     let top = &answer.candidates[0];
     assert!(top.inliers.unwrap() >= params.min_inliers as u32, "{top:?}");
@@ -116,7 +116,7 @@ fn verification_raises_recall_at_1_of_an_early_stopped_search() {
         min_score: 1e6,
         ..options.clone()
     };
-    let none = localizer.localize_file(&q.path, &strict).unwrap();
+    let none = localizer.localize_file(&q.path, &strict, None).unwrap();
     assert!(none.candidates.is_empty());
     assert_eq!(none.verified, Some(false));
 

@@ -24,9 +24,10 @@ pub struct QueryArgs {
     #[command(flatten)]
     search: SearchArgs,
     /// Streaming extraction's tile grid, COLSxROWS[+MARGIN][,coarse] (1x1: the
-    /// whole image at once; `,coarse`: a half-size pass first).
-    #[arg(long, default_value = "2x2+24")]
-    tiles: TileGrid,
+    /// whole image at once; `,coarse`: a half-size pass first). Default:
+    /// 2x2+24, or the whole image for the rule `none`, which cannot stop.
+    #[arg(long)]
+    tiles: Option<TileGrid>,
     #[command(flatten)]
     verify: VerifyArgs,
     /// Run the images, in the order given, as the frames of one camera
@@ -40,7 +41,7 @@ pub struct QueryArgs {
 
 pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     let mut localizer = Localizer::open(&a.vocab, &a.map, true)?;
-    localizer.tiles = a.tiles;
+    localizer.tiles = TileGrid::DEFAULT;
     localizer.set_verify(a.verify.params()?);
     let options = a.search.options()?;
     let model = a.model.model()?;
@@ -57,7 +58,7 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
         let prediction = a.sequence.then(|| filter.predict(&model, &topology, None));
         let mut frame_options = options.clone();
         frame_options.prior = prediction.as_ref().map(|p| Arc::new(p.prior.clone()));
-        let mut answer = localizer.localize_file(path, &frame_options)?;
+        let mut answer = localizer.localize_file(path, &frame_options, a.tiles)?;
         if let (Some(p), Some(post)) = (&prediction, answer.posterior.take()) {
             filter.update(post, p);
             answer.sequence = filter.belief().map(|b| {

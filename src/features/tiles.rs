@@ -29,6 +29,15 @@ pub struct TileGrid {
 }
 
 impl TileGrid {
+    /// The streaming grid front ends use unless told otherwise: 2 × 2 tiles
+    /// with 24 px of context.
+    pub const DEFAULT: Self = Self {
+        cols: 2,
+        rows: 2,
+        margin: 24,
+        coarse: false,
+    };
+
     /// The whole image in one piece.
     pub const WHOLE: Self = Self {
         cols: 1,

@@ -303,7 +303,7 @@ impl Default for SearchDefaults {
             min_score: o.min_score,
             quantizer: "exact".into(),
             tree_probes: 16,
-            tiles: "2x2+24".into(),
+            tiles: crate::features::TileGrid::DEFAULT.to_string(),
         }
     }
 }
