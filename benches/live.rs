@@ -65,7 +65,7 @@ fn main() {
     let mut b = MapBuilder::new(WORDS);
     for j in 0..images {
         let words = zipf_query(WORDS, FEATURES, j as u64);
-        b.add(ImageWords::with_geometry(format!("file/{j}"), &words, &kps));
+        b.add(ImageWords::with_geometry(format!("file/{j}"), &words, &[], &kps));
     }
     b.build("zipf", "synthetic", None).save(&path).unwrap();
     println!("map: {images} images, {WORDS} words, {FEATURES} features per image; {added} adds");
@@ -112,7 +112,7 @@ fn main() {
             name: format!("added/{k}"),
             place: String::new(),
             pose: Vec::new(),
-            features: pack_image(&words, &kps),
+            features: pack_image(&words, &[], &kps),
             added_at_ms: 0,
         });
         // the same change applied in memory only (no log): the part
@@ -210,7 +210,7 @@ fn main() {
             name: format!("extra/{k}"),
             place: String::new(),
             pose: Vec::new(),
-            features: pack_image(&words, &kps),
+            features: pack_image(&words, &[], &kps),
             added_at_ms: 0,
         }))
         .unwrap();

@@ -24,7 +24,7 @@ use crate::eval::sweep::{
     seed,
 };
 use crate::index::{ImageWords, MapBuilder, MapIndex};
-use crate::search::RuleSpec;
+use crate::search::{CodedFeatures, RuleSpec};
 use anyhow::Context;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -61,7 +61,7 @@ pub fn auto_warmup(counts: &[usize]) -> usize {
 /// A calibration map and its pseudo-queries.
 pub struct PseudoQueries {
     pub map: MapIndex,
-    pub queries: Vec<Vec<u32>>,
+    pub queries: Vec<CodedFeatures>,
 }
 
 /// Split `map` into a calibration map (even ids) and perturbed pseudo-queries
@@ -71,13 +71,26 @@ pub fn pseudo_queries(map: &MapIndex, seed: u64) -> PseudoQueries {
     let mut builder = MapBuilder::new(map.words());
     let mut queries = Vec::new();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    for (j, mut w) in words.into_iter().enumerate() {
+    for (j, w) in words.into_iter().enumerate() {
+        let stored = map.geometry(j as u32);
         if j % 2 == 0 {
-            builder.add(ImageWords::from_words(map.image(j as u32).name, &w));
+            let mut image = ImageWords::from_words(map.image(j as u32).name, &w);
+            image.geometry = stored.to_vec();
+            builder.add(image);
         } else {
-            w.shuffle(&mut rng);
-            w.truncate(((1.0 - DROP) * w.len() as f64).round() as usize);
-            queries.push(w);
+            // the stored features (word and signature) when the map keeps
+            // them, else the words alone
+            let mut features: Vec<(u32, u64)> = if stored.len() == w.len() {
+                stored.iter().map(|f| (f.word, f.signature())).collect()
+            } else {
+                w.iter().map(|&w| (w, 0)).collect()
+            };
+            features.shuffle(&mut rng);
+            features.truncate(((1.0 - DROP) * features.len() as f64).round() as usize);
+            queries.push(CodedFeatures {
+                words: features.iter().map(|f| f.0).collect(),
+                signatures: features.iter().map(|f| f.1).collect(),
+            });
         }
     }
     PseudoQueries {
@@ -102,7 +115,7 @@ pub struct Calibrated {
 /// permutations of every query.
 pub fn measure(
     map: &MapIndex,
-    queries: &[Vec<u32>],
+    queries: &[CodedFeatures],
     full_top1: &[Option<u32>],
     setting: &Setting,
     runs: u32,
@@ -112,7 +125,7 @@ pub fn measure(
         .flat_map(|run| (0..queries.len()).into_par_iter().map(move |q| (run, q)))
         .filter(|&(_, q)| full_top1[q].is_some())
         .map(|(run, q)| {
-            let o = search_one(map, &queries[q], setting, seed(run, q), 1);
+            let o = search_one(map, queries[q].known(), setting, seed(run, q), 1);
             let top = o.candidates.first().map(|c| c.id);
             ((top != full_top1[q]) as usize, o.fraction(), 1usize)
         })
@@ -122,12 +135,12 @@ pub fn measure(
 }
 
 /// Full bag-of-words' top-1 of every query.
-pub fn full_top1(map: &MapIndex, queries: &[Vec<u32>]) -> Vec<Option<u32>> {
+pub fn full_top1(map: &MapIndex, queries: &[CodedFeatures]) -> Vec<Option<u32>> {
     let none = Setting::new(RuleSpec::new("none", None).expect("built in"), 0);
     queries
         .par_iter()
         .map(|w| {
-            search_one(map, w, &none, 0, 1)
+            search_one(map, w.known(), &none, 0, 1)
                 .candidates
                 .first()
                 .map(|c| c.id)
@@ -177,7 +190,7 @@ pub fn calibrate_rule(
 ) -> anyhow::Result<Result<Calibrated, Failure>> {
     let (lo, hi, whole) = parameter_range(rule)
         .with_context(|| format!("rule `{rule}` has no parameter to calibrate"))?;
-    let counts: Vec<usize> = pseudo.queries.iter().map(Vec::len).collect();
+    let counts: Vec<usize> = pseudo.queries.iter().map(|q| q.words.len()).collect();
     let features = median_features(&counts);
     if min_features >= features {
         return Ok(Err(Failure::WarmupTooLarge {

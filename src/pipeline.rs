@@ -12,7 +12,7 @@ use crate::index::{ImageWords, MapBuilder, MapIndex, MapRead, Places};
 use crate::live::{LiveMap, Opened};
 use crate::quantize::{Quantizer, QuantizerKind};
 use crate::report::{CandidateMatches, EdgeTimings, Extraction, ImageSize, Localization};
-use crate::search::{self, Search, SearchOptions};
+use crate::search::{self, CodedFeatures, Search, SearchOptions};
 use crate::vocabulary::kmeans::{KmeansConfig, kmeans};
 use crate::vocabulary::{Vocabulary, VocabularyMeta};
 use anyhow::{Context, bail};
@@ -214,7 +214,7 @@ pub fn train_vocabulary(
         reseeded = report.reseeded,
         "vocabulary trained"
     );
-    Ok(Vocabulary::from_centroids(
+    Ok(Vocabulary::trained(
         centroids,
         VocabularyMeta {
             extract: extract.clone(),
@@ -223,6 +223,7 @@ pub fn train_vocabulary(
             iterations: report.iterations,
             ..Default::default()
         },
+        descriptors,
     ))
 }
 
@@ -261,17 +262,25 @@ pub fn quantize_all(quantizer: &dyn Quantizer, descriptors: ArrayView2<'_, f32>)
     words
 }
 
-/// The words of each image's descriptors, exactly quantized (`None`, an
-/// unreadable image, gives no words).
-pub fn words_per_image(vocab: &Vocabulary, features: &[Option<Features>]) -> Vec<Vec<u32>> {
+/// Each image's features quantized (exactly) and signed, in order (none for
+/// an unreadable image).
+pub fn words_per_image(vocab: &Vocabulary, features: &[Option<Features>]) -> Vec<CodedFeatures> {
     features
         .iter()
         .map(|f| {
             f.as_ref()
-                .map(|f| quantize_all(vocab.exact_quantizer(), f.descriptors.view()))
+                .map(|f| code(vocab, f.descriptors.view()))
                 .unwrap_or_default()
         })
         .collect()
+}
+
+/// Descriptors quantized (exactly) and signed.
+pub fn code(vocab: &Vocabulary, descriptors: ArrayView2<'_, f32>) -> CodedFeatures {
+    let words = quantize_all(vocab.exact_quantizer(), descriptors);
+    let mut signatures = vec![0u64; words.len()];
+    vocab.sign(descriptors, &words, &mut signatures);
+    CodedFeatures { words, signatures }
 }
 
 /// Build a map from per-image features (`None`: unreadable image, kept as
@@ -284,13 +293,12 @@ pub fn index_descriptors(
     places: Option<&Places>,
     map_name: &str,
 ) -> MapIndex {
-    let quantizer = vocab.exact_quantizer();
     let bar = progress_bar(names.len() as u64, "quantizing map");
     let images: Vec<ImageWords> = names
         .par_iter()
         .zip(features)
         .map(|(name, f)| {
-            let image = map_image_words(quantizer, name, f.as_ref());
+            let image = map_image_words(vocab, name, f.as_ref());
             bar.inc(1);
             image
         })
@@ -304,12 +312,13 @@ pub fn index_descriptors(
 }
 
 /// One map image as the map keeps it: each feature's word (exact
-/// quantization) and keypoint; no features when it could not be read.
-pub fn map_image_words(quantizer: &dyn Quantizer, name: &str, f: Option<&Features>) -> ImageWords {
+/// quantization), signature and keypoint; no features when it could not be
+/// read.
+pub fn map_image_words(vocab: &Vocabulary, name: &str, f: Option<&Features>) -> ImageWords {
     match f {
         Some(f) => {
-            let words = quantize_all(quantizer, f.descriptors.view());
-            ImageWords::with_geometry(name, &words, &f.keypoints)
+            let c = code(vocab, f.descriptors.view());
+            ImageWords::with_geometry(name, &c.words, &c.signatures, &f.keypoints)
         }
         None => ImageWords::from_words(name, &[]),
     }
@@ -410,7 +419,7 @@ impl Localizer {
     pub fn map_features(&self, bytes: &[u8]) -> Result<Vec<PackedFeature>, FeatureError> {
         let image = features::decode(bytes, self.limits)?;
         let f = features::extract(&image, &self.vocab.meta().extract)?;
-        Ok(map_image_words(self.vocab.exact_quantizer(), "", Some(&f)).geometry)
+        Ok(map_image_words(&self.vocab, "", Some(&f)).geometry)
     }
 
     /// Verification settings; `params.enabled` is the default of
@@ -567,6 +576,7 @@ impl Localizer {
             if let Some(full) = &mut full {
                 let quantize = search::descriptor_quantizer(
                     &*quantizer,
+                    self.vocab.hamming(),
                     tile.descriptors.view(),
                     options.block,
                 );
@@ -579,7 +589,12 @@ impl Localizer {
             tiles_used += 1;
             keypoints.extend_from_slice(&tile.keypoints);
             let quantize =
-                search::descriptor_quantizer(&*quantizer, tile.descriptors.view(), options.block);
+                search::descriptor_quantizer(
+                    &*quantizer,
+                    self.vocab.hamming(),
+                    tile.descriptors.view(),
+                    options.block,
+                );
             let mut check = LeaderVerifier {
                 map,
                 fit: &self.fit,

@@ -99,6 +99,9 @@ pub struct SearchArgs {
     /// Drop candidates scoring below this.
     #[arg(long, default_value_t = SearchOptions::recommended().min_score)]
     pub min_score: f32,
+    /// Vote plain tf-idf, without weighing votes by Hamming signatures.
+    #[arg(long)]
+    pub no_hamming: bool,
 }
 
 impl SearchArgs {
@@ -138,6 +141,11 @@ impl SearchArgs {
             min_score: self.min_score,
             deadline: None,
             prior: None,
+            hamming: if self.no_hamming {
+                None
+            } else {
+                recommended.hamming
+            },
         })
     }
 }

@@ -15,7 +15,7 @@ use bowloc::eval::sweep::{Setting, format_parameter, search_one, seed};
 use bowloc::features::DecodeLimits;
 use bowloc::index::MapIndex;
 use bowloc::pipeline::{extract_all, progress_bar, words_per_image};
-use bowloc::search::RuleSpec;
+use bowloc::search::{CodedFeatures, RuleSpec};
 use bowloc::vocabulary::Vocabulary;
 use clap::Args;
 use std::fmt::Write as _;
@@ -74,7 +74,7 @@ pub fn run(a: CalibrateArgs) -> anyhow::Result<()> {
         a.map.display(),
         map.images()
     );
-    let counts: Vec<usize> = pseudo.queries.iter().map(Vec::len).collect();
+    let counts: Vec<usize> = pseudo.queries.iter().map(|q| q.words.len()).collect();
     let warmup = a.min_features.unwrap_or_else(|| auto_warmup(&counts));
     let full = full_top1(&pseudo.map, &pseudo.queries);
     let transfer_data = a
@@ -111,7 +111,7 @@ pub fn run(a: CalibrateArgs) -> anyhow::Result<()> {
         a.runs
     );
     if let Some((_, queries)) = &transfer_data {
-        let real: Vec<usize> = queries.iter().map(Vec::len).collect();
+        let real: Vec<usize> = queries.iter().map(|q| q.words.len()).collect();
         write!(
             table,
             "; transfer checked on {} real queries ({} features each, median)",
@@ -201,7 +201,7 @@ pub fn run(a: CalibrateArgs) -> anyhow::Result<()> {
 fn transfer(
     map: &MapIndex,
     data: &Dataset,
-    queries: &[Vec<u32>],
+    queries: &[CodedFeatures],
     c: &Calibrated,
     max_disagreement: f64,
     runs: u32,
@@ -231,7 +231,7 @@ fn setting_of(c: &Calibrated) -> Setting {
 fn real_queries(
     dir: &std::path::Path,
     vocab: &Vocabulary,
-) -> anyhow::Result<(Dataset, Vec<Vec<u32>>)> {
+) -> anyhow::Result<(Dataset, Vec<CodedFeatures>)> {
     let data = Dataset::open(dir)?;
     let desc = extract_all(
         &data.queries,
@@ -247,7 +247,7 @@ fn real_queries(
 /// Share of (query with a match, run) whose top-1 is a ground-truth match.
 fn recall_at_1(
     map: &MapIndex,
-    queries: &[Vec<u32>],
+    queries: &[CodedFeatures],
     data: &Dataset,
     s: &Setting,
     runs: u32,
@@ -259,7 +259,7 @@ fn recall_at_1(
                 continue;
             }
             n += 1;
-            let o = search_one(map, words, s, seed(run, q), 1);
+            let o = search_one(map, words.known(), s, seed(run, q), 1);
             hits += o
                 .candidates
                 .first()

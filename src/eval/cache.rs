@@ -148,11 +148,12 @@ impl DescriptorSet {
     /// Image `i` as the sweep replays it, given its words (rows in order):
     /// its keypoints, its tiles, and decoding plus what extraction spends
     /// outside the tiles (downscaling) as the fixed cost.
-    pub fn query(&self, i: usize, words: Vec<u32>) -> Query {
+    pub fn query(&self, i: usize, words: Vec<u32>, signatures: Vec<u64>) -> Query {
         let tiles = self.meta.tiles.get(i).cloned().unwrap_or_default();
         let in_tiles: f64 = tiles.iter().map(|t| t.ms as f64).sum();
         Query {
             words,
+            signatures,
             keypoints: self.keypoints(i),
             fixed_ms: (self.extract_ms(i) - in_tiles).max(0.0) as f32,
             tiles,
@@ -331,7 +332,7 @@ pub fn vocabulary(
     config: &KmeansConfig,
 ) -> anyhow::Result<Vocabulary> {
     let path = dir.join(format!(
-        "vocab-k{}-seed{}-{:016x}.bowvoc",
+        "vocab-k{}-seed{}-{:016x}-he.bowvoc",
         config.k,
         config.seed,
         map.hash()
@@ -441,7 +442,7 @@ mod tests {
         assert_eq!(set.image(1).unwrap()[[1, 0]], (2 * DIM) as f32);
         assert_eq!(set.extract_ms(1), 6.0);
         // image 1 as a query: one tile of 0.5 ms, the rest fixed cost
-        let q = set.query(1, vec![7, 8]);
+        let q = set.query(1, vec![7, 8], vec![]);
         assert_eq!(
             (q.tiles.len(), q.fixed_ms, q.fixed_ms + q.tiles[0].ms),
             (1, 5.5, 6.0)

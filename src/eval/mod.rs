@@ -351,17 +351,19 @@ fn validate(config: &EvalConfig) -> anyhow::Result<Vec<&'static RuleGrid>> {
 /// Quantize every query once (timed), as the sweep replays it.
 fn quantize_queries(
     set: &cache::DescriptorSet,
-    quantizer: &dyn crate::quantize::Quantizer,
+    vocab: &Vocabulary,
     what: &str,
 ) -> (Vec<Query>, Vec<QueryCost>) {
+    let quantizer = vocab.exact_quantizer();
     let bar = progress_bar(set.len() as u64, what);
     let quantized: Vec<(Query, QueryCost)> = (0..set.len())
         .into_par_iter()
         .map(|q| {
             let w = match set.image(q) {
-                Some(d) => timing::quantize_timed(quantizer, d, BLOCK),
+                Some(d) => timing::quantize_timed(quantizer, vocab.hamming(), d, BLOCK),
                 None => timing::QueryWords {
                     words: Vec::new(),
+                    signatures: Vec::new(),
                     quantize_ms_per_feature: 0.0,
                 },
             };
@@ -369,7 +371,7 @@ fn quantize_queries(
             let cost = QueryCost {
                 quantize_ms_per_feature: w.quantize_ms_per_feature,
             };
-            (set.query(q, w.words), cost)
+            (set.query(q, w.words, w.signatures), cost)
         })
         .collect();
     bar.finish_and_clear();
@@ -513,7 +515,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         params: verify_params.clone(),
     });
     let quantize = |set: &cache::DescriptorSet, v: &Vocabulary, what: String| {
-        let (queries, costs) = quantize_queries(set, &v.exact_quantizer(), &what);
+        let (queries, costs) = quantize_queries(set, v, &what);
         SeedWords { queries, costs }
     };
     let per_seed: Vec<SeedWords> = vocabs

@@ -101,7 +101,7 @@ fn seed_maps(config: &ShardsConfig) -> anyhow::Result<Vec<(u64, MapIndex, Vec<Qu
             let map = cache::map_index(&config.cache, &vocab, &map_desc, &dataset.name)?;
             let (queries, _) = super::quantize_queries(
                 &query_desc,
-                &vocab.exact_quantizer(),
+                &vocab,
                 &format!("quantizing (seed {seed})"),
             );
             Ok((seed, map, queries))
@@ -167,7 +167,11 @@ fn compare(
         .par_iter()
         .map(|&(run, q)| {
             let query = &queries[q];
-            let options = setting.options(sweep::seed(run, q), config.top_n);
+            // the shards hold no signatures: both searches vote plain tf-idf
+            let options = SearchOptions {
+                hamming: None,
+                ..setting.options(sweep::seed(run, q), config.top_n)
+            };
             let one = query.search(map, &options, false).outcome;
             let (_, spans) = query.tile_order(options.seed);
             let s = shard::search_tiles(sharded, &query.batches(&spans), &options);

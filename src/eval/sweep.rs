@@ -7,7 +7,7 @@ use super::tiles::Query;
 use crate::calibrate::median_features;
 use crate::index::MapIndex;
 use crate::search::stop::RULES;
-use crate::search::{Ranked, RuleSpec, SearchOptions, StopKind, search_words};
+use crate::search::{Ranked, RuleSpec, SearchOptions, StopKind, KnownFeatures, search_words};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::{Serialize, Serializer};
@@ -226,19 +226,20 @@ impl Outcome {
     }
 }
 
-/// One search of a query known by its words, extracted whole at no cost.
+/// One search of a query known by its words and signatures, extracted whole
+/// at no cost.
 pub fn search_one(
     map: &MapIndex,
-    words: &[u32],
+    features: KnownFeatures<'_>,
     setting: &Setting,
     seed: u64,
     top_n: usize,
 ) -> Outcome {
-    let o = search_words(map, words, &setting.options(seed, top_n));
+    let o = search_words(map, features, &setting.options(seed, top_n));
     Outcome {
         candidates: o.candidates,
         used: o.features_used as u32,
-        total: words.len() as u32,
+        total: features.len() as u32,
         stop: o.stop.kind,
         vote_ms: o.timings.vote.as_secs_f32() * 1e3,
         extract_ms: 0.0,

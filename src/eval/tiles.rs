@@ -32,6 +32,8 @@ pub struct Tile {
 #[derive(Clone, Default)]
 pub struct Query {
     pub words: Vec<u32>,
+    /// Hamming signature of each word (empty: all 0).
+    pub signatures: Vec<u64>,
     /// Keypoint of each word (empty: the query cannot be verified).
     pub keypoints: Vec<Keypoint>,
     /// Empty: the whole image as one tile that cost nothing to extract.
@@ -100,12 +102,26 @@ impl Query {
         (order, spans)
     }
 
-    /// The words of each span of [`tile_order`](Self::tile_order), with its share of the image.
-    pub fn batches(&self, spans: &[(usize, usize, f64)]) -> Vec<(&[u32], f64)> {
+    /// The features of each span of [`tile_order`](Self::tile_order), with its share of the image.
+    pub fn batches(&self, spans: &[(usize, usize, f64)]) -> Vec<(search::KnownFeatures<'_>, f64)> {
         spans
             .iter()
-            .map(|&(a, b, area)| (&self.words[a..b], area))
+            .map(|&(a, b, area)| {
+                let features = search::KnownFeatures {
+                    words: &self.words[a..b],
+                    signatures: self.signatures.get(a..b).unwrap_or(&[]),
+                };
+                (features, area)
+            })
             .collect()
+    }
+
+    /// All its features, in grid order.
+    pub fn features(&self) -> search::KnownFeatures<'_> {
+        search::KnownFeatures {
+            words: &self.words,
+            signatures: &self.signatures,
+        }
     }
 
     /// Search as the service does with streaming extraction: tiles in the

@@ -10,16 +10,20 @@
 //! inside the search (a small share of a request).
 
 use crate::quantize::Quantizer;
+use crate::vocabulary::HammingEmbedding;
 use cpu_time::ThreadTime;
 use ndarray::{ArrayView2, Axis};
 use serde::Serialize;
 
-/// A query's words and what quantizing one of its features cost.
+/// A query's words and signatures, and what quantizing one of its features
+/// cost.
 #[derive(Debug, Clone)]
 pub struct QueryWords {
     /// Word of each descriptor, in the original order.
     pub words: Vec<u32>,
-    /// Milliseconds per feature with the blocked quantizer.
+    /// Hamming signature of each descriptor (all 0 without an embedding).
+    pub signatures: Vec<u64>,
+    /// Milliseconds per feature with the blocked quantizer, signing included.
     pub quantize_ms_per_feature: f64,
 }
 
@@ -28,18 +32,24 @@ pub struct QueryWords {
 /// faster one is kept (the first warms the caches).
 pub fn quantize_timed(
     quantizer: &dyn Quantizer,
+    signer: Option<&HammingEmbedding>,
     descriptors: ArrayView2<'_, f32>,
     block: usize,
 ) -> QueryWords {
     let mut words = vec![0u32; descriptors.nrows()];
+    let mut signatures = vec![0u64; descriptors.nrows()];
     let mut fastest = f64::INFINITY;
     for _ in 0..2 {
         let started = ThreadTime::now();
-        for (rows, out) in descriptors
+        for ((rows, out), signed) in descriptors
             .axis_chunks_iter(Axis(0), block.max(1))
             .zip(words.chunks_mut(block.max(1)))
+            .zip(signatures.chunks_mut(block.max(1)))
         {
             quantizer.quantize(rows, out);
+            if let Some(he) = signer {
+                he.sign(rows, out, signed);
+            }
         }
         fastest = fastest.min(started.elapsed().as_secs_f64() * 1e3);
     }
@@ -50,6 +60,7 @@ pub fn quantize_timed(
             fastest / words.len() as f64
         },
         words,
+        signatures,
     }
 }
 
@@ -175,7 +186,7 @@ mod tests {
         let centroids = Array2::from_shape_fn((7, 4), |(i, j)| ((i * 37 + j * 101) as f32).sin());
         let vocab = Vocabulary::from_centroids(centroids.clone(), VocabularyMeta::default());
         let rows = Array2::from_shape_fn((45, 4), |(i, j)| ((i * 53 + j * 17 + 5) as f32).cos());
-        let q = quantize_timed(&vocab.exact_quantizer(), rows.view(), 8);
+        let q = quantize_timed(&vocab.exact_quantizer(), None, rows.view(), 8);
         assert_eq!(q.words.len(), 45);
         for (row, &w) in rows.rows().into_iter().zip(&q.words) {
             assert_eq!(w, naive_nearest(centroids.view(), row.as_slice().unwrap()));
@@ -183,7 +194,7 @@ mod tests {
         assert!(q.quantize_ms_per_feature >= 0.0);
         let empty = Array2::<f32>::zeros((0, 4));
         assert_eq!(
-            quantize_timed(&vocab.exact_quantizer(), empty.view(), 8).quantize_ms_per_feature,
+            quantize_timed(&vocab.exact_quantizer(), None, empty.view(), 8).quantize_ms_per_feature,
             0.0
         );
     }

@@ -112,7 +112,7 @@ mod tests {
     fn map(features: &[(u32, f32, f32)]) -> Vec<PackedFeature> {
         let words: Vec<u32> = features.iter().map(|f| f.0).collect();
         let kps: Vec<Keypoint> = features.iter().map(|f| kp(f.1, f.2)).collect();
-        super::super::packed::pack_image(&words, &kps)
+        super::super::packed::pack_image(&words, &[], &kps)
     }
 
     #[test]

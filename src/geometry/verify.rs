@@ -450,8 +450,8 @@ mod tests {
         let kps: Vec<Keypoint> = words.iter().map(|&w| kp(w)).collect();
         let other: Vec<u32> = (20..40).collect();
         let mut b = MapBuilder::new(40);
-        b.add(ImageWords::with_geometry("a", &words, &kps));
-        b.add(ImageWords::with_geometry("b", &other, &kps));
+        b.add(ImageWords::with_geometry("a", &words, &[], &kps));
+        b.add(ImageWords::with_geometry("b", &other, &[], &kps));
         let map = b.build("m", "v", None);
         let query: Vec<(u32, Keypoint)> = words.iter().map(|&w| (w, kp(w))).collect();
         let fit = AllInliers(VerifyParams::default().fit());

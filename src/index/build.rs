@@ -38,12 +38,18 @@ impl ImageWords {
         }
     }
 
-    /// Words and the keypoints they came from (`keypoints[i]` is the
-    /// feature of `words[i]`), so the map can verify geometry.
-    pub fn with_geometry(name: impl Into<String>, words: &[u32], keypoints: &[Keypoint]) -> Self {
+    /// Words, their signatures (or none: all 0) and the keypoints they came
+    /// from (`keypoints[i]` is the feature of `words[i]`), so the map can
+    /// weigh votes and verify geometry.
+    pub fn with_geometry(
+        name: impl Into<String>,
+        words: &[u32],
+        signatures: &[u64],
+        keypoints: &[Keypoint],
+    ) -> Self {
         debug_assert_eq!(words.len(), keypoints.len());
         Self {
-            geometry: pack_image(words, keypoints),
+            geometry: pack_image(words, signatures, keypoints),
             ..Self::from_words(name, words)
         }
     }

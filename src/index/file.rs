@@ -171,10 +171,11 @@ mod tests {
         b.add(ImageWords::with_geometry(
             "a",
             &[3, 1, 1],
+            &[],
             &[kp(1.0, 2.0), kp(3.0, 4.0), kp(5.0, 6.0)],
         ));
         b.add(ImageWords::from_words("no features", &[]));
-        b.add(ImageWords::with_geometry("c", &[2], &[kp(7.0, 8.0)]));
+        b.add(ImageWords::with_geometry("c", &[2], &[], &[kp(7.0, 8.0)]));
         let built = b.build("t", "0", None);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("m.bowmap");

@@ -397,7 +397,7 @@ mod tests {
                 name: name.into(),
                 place: "lab".into(),
                 pose: vec![1.5, f64::NAN],
-                features: pack_image(words, &kps),
+                features: pack_image(words, &[], &kps),
                 added_at_ms: 1_700_000_000_000,
             }),
         }

@@ -28,7 +28,7 @@ fn features(words: &[u32]) -> Vec<crate::geometry::packed::PackedFeature> {
             response: 0.0,
         })
         .collect();
-    pack_image(words, &kps)
+    pack_image(words, &[], &kps)
 }
 
 fn new_image(name: &str, words: &[u32]) -> NewImage {

@@ -34,6 +34,8 @@ pub use trace::{Trace, TracePoint};
 pub use vote::{Needs, Tally, VoteStats, Voter};
 
 use crate::index::MapRead;
+pub use vote::HammingWeights;
+use crate::vocabulary::HammingEmbedding;
 use crate::quantize::Quantizer;
 use ndarray::{Array2, ArrayView2};
 use serde::Serialize;
@@ -61,6 +63,8 @@ pub struct SearchOptions {
     /// images keeps them out of the candidates, and the outcome carries the
     /// posterior it gives.
     pub prior: Option<Arc<Prior>>,
+    /// Weigh votes by the features' Hamming signatures (`None`: plain tf-idf).
+    pub hamming: Option<HammingWeights>,
 }
 
 impl Default for SearchOptions {
@@ -74,6 +78,7 @@ impl Default for SearchOptions {
             min_score: 0.0,
             deadline: None,
             prior: None,
+            hamming: Some(HammingWeights::DEFAULT),
         }
     }
 }
@@ -172,6 +177,7 @@ pub struct Search<'m> {
     voter: Voter<'m>,
     rule: Box<dyn StopRule>,
     words: Vec<u32>,
+    signatures: Vec<u64>,
     timings: SearchTimings,
     stop: Option<(StopKind, String)>,
     batches: u64,
@@ -188,12 +194,16 @@ impl<'m> Search<'m> {
             top_n: options.top_n,
             prior: options.prior.clone(),
         });
-        let voter = Voter::with_needs(&map.view(), rule.needs());
+        let mut voter = Voter::with_needs(&map.view(), rule.needs());
+        if let Some(weights) = options.hamming {
+            voter = voter.with_hamming(map, weights);
+        }
         Self {
             options: options.clone(),
             voter,
             rule,
             words: vec![0; options.block.max(1)],
+            signatures: vec![0; options.block.max(1)],
             timings: SearchTimings::default(),
             stop: None,
             batches: 0,
@@ -238,10 +248,11 @@ impl<'m> Search<'m> {
     }
 
     /// Vote a batch of `count` features in a random order drawn from the
-    /// seed. `quantize(indices, words)` fills `words[..indices.len()]` with
-    /// the words of the batch's features at `indices` (numbered in the batch
-    /// from 0). Returns whether the search has stopped.
-    pub fn feed(&mut self, count: usize, quantize: impl FnMut(&[u32], &mut [u32])) -> bool {
+    /// seed. `quantize(indices, words, signatures)` fills
+    /// `words[..indices.len()]` and `signatures[..indices.len()]` with the
+    /// words and Hamming signatures of the batch's features at `indices`
+    /// (numbered in the batch from 0). Returns whether the search has stopped.
+    pub fn feed(&mut self, count: usize, quantize: impl FnMut(&[u32], &mut [u32], &mut [u64])) -> bool {
         self.feed_checked(count, quantize, None)
     }
 
@@ -250,7 +261,7 @@ impl<'m> Search<'m> {
     pub fn feed_checked(
         &mut self,
         count: usize,
-        mut quantize: impl FnMut(&[u32], &mut [u32]),
+        mut quantize: impl FnMut(&[u32], &mut [u32], &mut [u64]),
         mut leader_check: Option<&mut dyn LeaderCheck>,
     ) -> bool {
         if self.stopped() {
@@ -270,12 +281,17 @@ impl<'m> Search<'m> {
                 return true;
             }
             let started = Instant::now();
-            quantize(indices, &mut self.words[..indices.len()]);
+            quantize(
+                indices,
+                &mut self.words[..indices.len()],
+                &mut self.signatures[..indices.len()],
+            );
             let quantized = Instant::now();
             self.timings.quantize += quantized - started;
             let mut checking = Duration::ZERO;
-            for (&i, &w) in indices.iter().zip(&self.words[..indices.len()]) {
-                self.voter.vote(w);
+            let batch = self.words[..indices.len()].iter().zip(&self.signatures);
+            for (&i, (&w, &signature)) in indices.iter().zip(batch) {
+                self.voter.vote(w, signature);
                 self.voted.push((offset + i, w));
                 let features = self.voter.tally().features;
                 let why = if features < self.options.min_features {
@@ -323,7 +339,7 @@ impl<'m> Search<'m> {
         count: usize,
         share: f64,
         last: bool,
-        quantize: impl FnMut(&[u32], &mut [u32]),
+        quantize: impl FnMut(&[u32], &mut [u32], &mut [u64]),
         leader_check: Option<&mut dyn LeaderCheck>,
     ) -> bool {
         let fed = self.fed + count;
@@ -384,9 +400,11 @@ impl<'m> Search<'m> {
     }
 }
 
-/// Search with descriptors: quantize each block of permuted rows with `quantizer`.
+/// Search with descriptors: quantize (and sign, with `signer`) each block of
+/// permuted rows.
 pub fn search(
     quantizer: &dyn Quantizer,
+    signer: Option<&HammingEmbedding>,
     map: &dyn MapRead,
     descriptors: ArrayView2<'_, f32>,
     options: &SearchOptions,
@@ -395,53 +413,108 @@ pub fn search(
         map,
         descriptors.nrows(),
         options,
-        descriptor_quantizer(quantizer, descriptors, options.block),
+        descriptor_quantizer(quantizer, signer, descriptors, options.block),
     )
 }
 
-/// A `quantize(indices, words)` callback over rows of `descriptors`, copying
-/// each block of permuted rows into one buffer for the quantizer.
+/// A `quantize(indices, words, signatures)` callback over rows of
+/// `descriptors`, copying each block of permuted rows into one buffer for the
+/// quantizer; signatures are 0 without a `signer`.
 pub fn descriptor_quantizer<'q>(
     quantizer: &'q dyn Quantizer,
+    signer: Option<&'q HammingEmbedding>,
     descriptors: ArrayView2<'q, f32>,
     block: usize,
-) -> impl FnMut(&[u32], &mut [u32]) + 'q {
+) -> impl FnMut(&[u32], &mut [u32], &mut [u64]) + 'q {
     let mut buffer = Array2::<f32>::zeros((block.max(1), descriptors.ncols()));
-    move |indices, words| {
+    move |indices, words, signatures| {
         for (mut dst, &i) in buffer.rows_mut().into_iter().zip(indices) {
             dst.assign(&descriptors.row(i as usize));
         }
-        quantizer.quantize(buffer.slice(ndarray::s![..indices.len(), ..]), words);
+        let rows = buffer.slice(ndarray::s![..indices.len(), ..]);
+        quantizer.quantize(rows, words);
+        match signer {
+            Some(he) => he.sign(rows, words, signatures),
+            None => signatures.fill(0),
+        }
     }
 }
 
-/// Stream an image's tiles through a search, tiles given as their features'
-/// words in extraction order with the image share each one covers: what
-/// the service does with real tiles, on words known in advance (used by
-/// evaluation). Returns the outcome, the (feature number, word) pairs voted
-/// and the tiles extracted.
+/// Features known in advance: feature i quantized to `words[i]` with
+/// signature `signatures[i]` (0 where `signatures` is short).
+#[derive(Debug, Clone, Copy)]
+pub struct KnownFeatures<'a> {
+    pub words: &'a [u32],
+    pub signatures: &'a [u64],
+}
+
+impl<'a> KnownFeatures<'a> {
+    /// Words without signatures (all 0).
+    pub fn words(words: &'a [u32]) -> Self {
+        Self {
+            words,
+            signatures: &[],
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.words.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.words.is_empty()
+    }
+
+    /// The `quantize` callback that looks them up.
+    fn lookup(&self) -> impl FnMut(&[u32], &mut [u32], &mut [u64]) + '_ {
+        move |indices, words, signatures| {
+            for ((w, s), &i) in words.iter_mut().zip(signatures.iter_mut()).zip(indices) {
+                *w = self.words[i as usize];
+                *s = self.signatures.get(i as usize).copied().unwrap_or(0);
+            }
+        }
+    }
+}
+
+/// Owned [`KnownFeatures`]: a query quantized and signed once, searched
+/// many times.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CodedFeatures {
+    pub words: Vec<u32>,
+    pub signatures: Vec<u64>,
+}
+
+impl CodedFeatures {
+    pub fn known(&self) -> KnownFeatures<'_> {
+        KnownFeatures {
+            words: &self.words,
+            signatures: &self.signatures,
+        }
+    }
+}
+
+/// Stream an image's tiles through a search, tiles given as their features
+/// (known in advance) in extraction order with the image share each one
+/// covers: what the service does with real tiles (used by evaluation).
+/// Returns the outcome, the (feature number, word) pairs voted and the tiles
+/// extracted.
 pub fn search_tiles(
     map: &dyn MapRead,
-    tiles: &[(&[u32], f64)],
+    tiles: &[(KnownFeatures<'_>, f64)],
     options: &SearchOptions,
     mut leader_check: Option<&mut dyn LeaderCheck>,
 ) -> (SearchOutcome, Vec<(u32, u32)>, usize) {
     let mut s = Search::new(map, options);
     let mut share = 0.0;
     let mut used = 0;
-    for (k, &(words, area)) in tiles.iter().enumerate() {
+    for (k, (features, area)) in tiles.iter().enumerate() {
         share += area;
         used += 1;
         let last = k + 1 == tiles.len();
-        let quantize = |indices: &[u32], out: &mut [u32]| {
-            for (o, &i) in out.iter_mut().zip(indices) {
-                *o = words[i as usize];
-            }
-        };
         let check = leader_check
             .as_mut()
             .map(|c| &mut **c as &mut dyn LeaderCheck);
-        if s.feed_tile(words.len(), share, last, quantize, check) {
+        if s.feed_tile(features.len(), share, last, features.lookup(), check) {
             break;
         }
     }
@@ -449,24 +522,25 @@ pub fn search_tiles(
     (s.finish(), voted, used)
 }
 
-/// Search over words already known: feature i quantizes to `words[i]`. Gives
-/// exactly the outcome of [`search`] with a quantizer that returns those words
-/// (used by evaluation, which quantizes each query once and votes many times).
-pub fn search_words(map: &dyn MapRead, words: &[u32], options: &SearchOptions) -> SearchOutcome {
-    search_with(map, words.len(), options, |indices, out| {
-        for (o, &i) in out.iter_mut().zip(indices) {
-            *o = words[i as usize];
-        }
-    })
+/// Search over features known in advance. Gives exactly the outcome of
+/// [`search`] with a quantizer that returns those words and signatures (used
+/// by evaluation, which quantizes each query once and votes many times).
+pub fn search_words(
+    map: &dyn MapRead,
+    features: KnownFeatures<'_>,
+    options: &SearchOptions,
+) -> SearchOutcome {
+    search_with(map, features.len(), options, features.lookup())
 }
 
-/// One batch of `total` features. `quantize(indices, words)` fills
-/// `words[..indices.len()]` with the words of the features at `indices`.
+/// One batch of `total` features. `quantize(indices, words, signatures)`
+/// fills `words[..indices.len()]` and `signatures[..indices.len()]` for the
+/// features at `indices`.
 pub fn search_with(
     map: &dyn MapRead,
     total: usize,
     options: &SearchOptions,
-    quantize: impl FnMut(&[u32], &mut [u32]),
+    quantize: impl FnMut(&[u32], &mut [u32], &mut [u64]),
 ) -> SearchOutcome {
     let mut s = Search::new(map, options);
     s.set_total(total);

@@ -19,7 +19,10 @@
 use super::rank::Ranked;
 use super::stop::{RuleContext, StopRule};
 use super::vote::{Needs, Tally, VoteStats, Voter};
-use super::{SearchOptions, SearchOutcome, SearchTimings, StopInfo, StopKind, batch_seed, permute};
+use super::{
+    KnownFeatures, SearchOptions, SearchOutcome, SearchTimings, StopInfo, StopKind, batch_seed,
+    permute,
+};
 use crate::index::{MapIndex, MapView, Postings, StringTable};
 use serde::Serialize;
 
@@ -289,10 +292,12 @@ pub struct ShardedOutcome {
 /// [`super::search_tiles`] over a sharded map, for words known in advance:
 /// tiles in extraction order with the image share each one covers, each
 /// tile's features in the order one machine would vote them, blocks of
-/// `options.block` words sent to every shard.
+/// `options.block` words sent to every shard. The shards hold postings only,
+/// not the map's features, so votes are plain tf-idf: signatures are not
+/// read, and the one-machine search it matches has `hamming: None`.
 pub fn search_tiles(
     map: &ShardedMap<'_>,
-    tiles: &[(&[u32], f64)],
+    tiles: &[(KnownFeatures<'_>, f64)],
     options: &SearchOptions,
 ) -> ShardedOutcome {
     let shards = map.shards();
@@ -332,7 +337,8 @@ pub fn search_tiles(
     let block = options.block.max(1);
     let mut reports: Vec<Vec<Report>> = Vec::new();
     let mut share = 0.0;
-    'tiles: for (k, &(words, area)) in tiles.iter().enumerate() {
+    'tiles: for (k, &(features, area)) in tiles.iter().enumerate() {
+        let words = features.words;
         fed += words.len();
         share += area;
         if k + 1 == tiles.len() {
@@ -358,7 +364,7 @@ pub fn search_tiles(
                         .iter_mut()
                         .enumerate()
                         .map(|(s, v)| {
-                            v.vote(w);
+                            v.vote(w, 0);
                             Report::of(v, shard_needs, shards, s)
                         })
                         .collect(),
@@ -412,7 +418,7 @@ mod tests {
     use super::*;
     use crate::index::synthetic::zipf_map;
     use crate::search::stop::RULES;
-    use crate::search::{RuleSpec, search_tiles as one_machine};
+    use crate::search::{KnownFeatures, RuleSpec, search_tiles as one_machine};
 
     /// On a synthetic map, every vote-only rule stops at the same feature
     /// and ranks the same candidates with the same scores on 1, 2, 3 and 8
@@ -436,8 +442,10 @@ mod tests {
                     let mut query = words[q as usize * 7 % 120].clone();
                     query.extend_from_slice(&words[(q as usize * 13 + 5) % 120][..20]);
                     let quarter = query.len().div_ceil(4);
-                    let tiles: Vec<(&[u32], f64)> =
-                        query.chunks(quarter).map(|c| (c, 0.25)).collect();
+                    let tiles: Vec<(KnownFeatures<'_>, f64)> = query
+                        .chunks(quarter)
+                        .map(|c| (KnownFeatures::words(c), 0.25))
+                        .collect();
                     for min_features in [0, 30] {
                         let options = SearchOptions {
                             rule: rule.clone(),
@@ -445,6 +453,7 @@ mod tests {
                             seed: q,
                             block: 8,
                             min_features,
+                            hamming: None,
                             ..SearchOptions::default()
                         };
                         let (one, _, _) = one_machine(&map, &tiles, &options, None);

@@ -11,9 +11,56 @@
 //! the statistics each shard reports ([`super::shard`]).
 //! A map with changes ([`Overlay`]) is voted the same way: w's list in the
 //! file, skipping removed images, then w's list of added images.
+//!
+//! With Hamming weights ([`HammingWeights`], Jégou et al. 2008), a vote also
+//! counts how close the query feature lies to image j's features of word w:
+//! idf(w)·d̂_j(w) is scaled by the mean of g(distance) over those features,
+//! g(h) = exp(−(h/σ)²) for h ≤ the largest distance and 0 beyond, so a word
+//! shared by chance (far corners of its cell) adds little. With every
+//! signature 0 the scale is 1: plain tf-idf.
 
+use crate::geometry::packed::{PackedFeature, word_run};
 use crate::index::overlay::{Flat, is_set};
-use crate::index::{MapView, Overlay, Postings};
+use crate::index::{MapRead, MapView, Overlay, Postings};
+use crate::vocabulary::hamming::{BITS, distance};
+
+/// How a vote is weighed by the Hamming distance between the query
+/// feature's signature and the map features' of the same word.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct HammingWeights {
+    /// Features further apart than this many bits (of 64) do not vote.
+    pub max_distance: u32,
+    /// Width of the Gaussian weight, in bits.
+    pub sigma: f32,
+}
+
+impl HammingWeights {
+    /// The weights the service and evaluation default to (docs/results.md,
+    /// "Hamming embedding").
+    pub const DEFAULT: Self = Self {
+        max_distance: 28,
+        sigma: 16.0,
+    };
+
+    /// g(h) for h = 0..=64.
+    pub fn table(&self) -> [f32; BITS + 1] {
+        std::array::from_fn(|h| {
+            if h as u32 > self.max_distance {
+                0.0
+            } else if self.sigma.is_finite() && self.sigma > 0.0 {
+                (-(h as f32 / self.sigma).powi(2)).exp()
+            } else {
+                1.0
+            }
+        })
+    }
+}
+
+impl Default for HammingWeights {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
 
 /// Running statistics of the histogram after `features` votes.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -191,6 +238,13 @@ pub struct Voter<'a> {
     /// Σ v² per image, with its own top 2, when a rule needs them.
     squares: Option<(Vec<f32>, TopK)>,
     tally: Tally,
+    /// g(distance), when votes are weighed by signatures.
+    hamming: Option<[f32; BITS + 1]>,
+    /// The file's images' features (sorted by word), by image.
+    geometry_offsets: &'a [u64],
+    geometry: &'a [PackedFeature],
+    /// Where the added images' features are read.
+    added_geometry: Option<&'a dyn MapRead>,
 }
 
 impl<'a> Voter<'a> {
@@ -225,7 +279,42 @@ impl<'a> Voter<'a> {
                 vote_cap,
                 ..Tally::default()
             },
+            hamming: None,
+            geometry_offsets: map.geometry_offsets,
+            geometry: map.geometry,
+            added_geometry: None,
         }
+    }
+
+    /// Weigh votes by signatures with `weights`, reading the features of
+    /// images added to `map` (a live map) through it.
+    pub fn with_hamming(mut self, map: &'a dyn MapRead, weights: HammingWeights) -> Self {
+        self.hamming = Some(weights.table());
+        self.added_geometry = Some(map);
+        self
+    }
+
+    /// Mean g(distance) between `signature` and image j's features of word
+    /// `w`; 1 without weights, or for an image whose features are not stored.
+    #[inline]
+    fn agreement(&self, j: u32, w: u32, signature: u64) -> f32 {
+        let Some(table) = &self.hamming else {
+            return 1.0;
+        };
+        let j = j as usize;
+        let features = match (self.geometry_offsets.get(j), self.geometry_offsets.get(j + 1)) {
+            (Some(&a), Some(&b)) => self.geometry.get(a as usize..b as usize).unwrap_or(&[]),
+            _ => self.added_geometry.map_or(&[][..], |m| m.geometry(j as u32)),
+        };
+        let run = word_run(features, w);
+        if run.is_empty() {
+            return 1.0;
+        }
+        let sum: f32 = run
+            .iter()
+            .map(|f| table[distance(f.signature(), signature) as usize])
+            .sum();
+        sum / run.len() as f32
     }
 
     /// The query has exactly `n` features.
@@ -241,9 +330,10 @@ impl<'a> Voter<'a> {
         }
     }
 
-    /// Apply the votes of one feature quantized to word `w`.
+    /// Apply the votes of one feature quantized to word `w` with Hamming
+    /// signature `signature` (read only with weights).
     #[inline]
-    pub fn vote(&mut self, w: u32) {
+    pub fn vote(&mut self, w: u32, signature: u64) {
         self.tally.features += 1;
         let factor = self.idf.get(w as usize).copied().unwrap_or(0.0);
         if factor <= 0.0 {
@@ -251,21 +341,24 @@ impl<'a> Voter<'a> {
         }
         let (images, weights) = self.postings.list(w);
         let mut added = 0.0f64;
-        if self.removed.is_empty() {
+        let weighed = self.hamming.is_some();
+        if self.removed.is_empty() && !weighed {
             for (&j, &d) in images.iter().zip(weights) {
                 added += self.cast(j, factor * d);
             }
         } else {
             for (&j, &d) in images.iter().zip(weights) {
                 if !is_set(self.removed, j) {
-                    added += self.cast(j, factor * d);
+                    let a = self.agreement(j, w, signature);
+                    added += self.cast(j, factor * d * a);
                 }
             }
         }
         if let Some(flat) = self.added {
             for &(j, d) in flat.list(w) {
                 if !is_set(self.removed, j) {
-                    added += self.cast(j, factor * d);
+                    let a = self.agreement(j, w, signature);
+                    added += self.cast(j, factor * d * a);
                 }
             }
         }
@@ -282,7 +375,7 @@ impl<'a> Voter<'a> {
     /// Add vote `v` to image `j`; returns what was added.
     #[inline]
     fn cast(&mut self, j: u32, v: f32) -> f64 {
-        let Some(h) = self.hist.get_mut(j as usize) else {
+        let Some(h) = self.hist.get_mut(j as usize).filter(|_| v > 0.0) else {
             return 0.0;
         };
         if *h == 0.0 {
@@ -419,7 +512,7 @@ mod tests {
             for (&j, &d) in ids.iter().zip(ds) {
                 squares[j as usize] += (factor * d) * (factor * d);
             }
-            voter.vote(w);
+            voter.vote(w, 0);
             let h = voter.histogram();
             let t = voter.tally();
             let max = h.iter().copied().fold(0.0f32, f32::max);

@@ -227,7 +227,7 @@ fn build_missing(config: &Config, vocab_missing: bool, progress: &Progress) -> a
             iterations: report.iterations,
             ..Default::default()
         };
-        let vocab = Vocabulary::from_centroids(centroids, meta);
+        let vocab = Vocabulary::trained(centroids, meta, data.view());
         create_parent(&config.files.vocabulary)?;
         vocab.save(&config.files.vocabulary)?;
         tracing::info!(

@@ -227,6 +227,8 @@ pub struct SearchDefaults {
     /// until the rule stops the search; `1x1` extracts the whole image first;
     /// a `,coarse` suffix extracts the whole image at half size first.
     pub tiles: String,
+    /// Weigh votes by the features' Hamming signatures (false: plain tf-idf).
+    pub hamming: bool,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -304,6 +306,7 @@ impl Default for SearchDefaults {
             quantizer: "exact".into(),
             tree_probes: 16,
             tiles: crate::features::TileGrid::DEFAULT.to_string(),
+            hamming: o.hamming.is_some(),
         }
     }
 }

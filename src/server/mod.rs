@@ -96,6 +96,7 @@ impl AppState {
                 min_score: s.min_score,
                 deadline: None,
                 prior: None,
+                hamming: s.hamming.then_some(crate::search::HammingWeights::DEFAULT),
             },
             max_top_n: config.limits.max_top_n,
         };

@@ -1,6 +1,9 @@
-//! The vocabulary file: sections `meta` (JSON) and `centroids` (f32, K × D).
+//! The vocabulary file: sections `meta` (JSON), `centroids` (f32, K × D)
+//! and, when it has one, the Hamming embedding (`hamming.projection`, 64 × D,
+//! and `hamming.thresholds`, K × 64). A file without the embedding (written
+//! before it existed) still loads and signs every feature 0.
 
-use super::{Backing, Vocabulary};
+use super::{Backing, HammingEmbedding, Vocabulary};
 use crate::features::ExtractConfig;
 use crate::store::{Store, StoreError, StoreWriter};
 use serde::{Deserialize, Serialize};
@@ -25,10 +28,16 @@ pub struct VocabularyMeta {
 }
 
 pub(super) fn save(vocab: &Vocabulary, path: &Path) -> Result<(), StoreError> {
-    StoreWriter::new(MAGIC, VERSION)
+    let mut writer = StoreWriter::new(MAGIC, VERSION);
+    writer
         .json("meta", &vocab.meta)
-        .f32s("centroids", vocab.centroid_slice())
-        .write_atomic(path)?;
+        .f32s("centroids", vocab.centroid_slice());
+    if let Some(he) = &vocab.hamming {
+        writer
+            .f32s("hamming.projection", he.projection())
+            .f32s("hamming.thresholds", he.thresholds());
+    }
+    writer.write_atomic(path)?;
     Ok(())
 }
 
@@ -51,7 +60,25 @@ pub(super) fn open(path: &Path, verify: bool) -> Result<Vocabulary, StoreError> 
         return Err(store.invalid("centroids hold NaN or infinite values"));
     }
     let hash = store.section("centroids")?.checksum;
+    let hamming = match (
+        store.f32s("hamming.projection"),
+        store.f32s("hamming.thresholds"),
+    ) {
+        (Ok(p), Ok(t)) => Some(
+            HammingEmbedding::from_parts(p, t, meta.dim, meta.words)
+                .map_err(|e| store.invalid(e))?,
+        ),
+        _ => {
+            tracing::warn!(
+                path = %path.display(),
+                "the vocabulary has no Hamming embedding: votes are plain tf-idf; \
+                 retrain it (`bowloc vocab`) for better recall"
+            );
+            None
+        }
+    };
     Ok(Vocabulary {
+        hamming,
         backing: Backing::Mapped(store),
         meta,
         hash,

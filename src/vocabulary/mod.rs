@@ -1,9 +1,14 @@
 //! The visual vocabulary: K centroids of descriptor space (the visual words),
-//! their precomputed squared norms, and the extraction settings they were
-//! trained with. Loaded by memory-mapping a store file; trained by `kmeans`.
+//! their precomputed squared norms, the extraction settings they were
+//! trained with, and the Hamming embedding that signs each feature within
+//! its word (`hamming`). Loaded by memory-mapping a store file; trained by
+//! `kmeans`.
 
 mod file;
+pub mod hamming;
 pub mod kmeans;
+
+pub use hamming::HammingEmbedding;
 
 pub use file::VocabularyMeta;
 
@@ -20,6 +25,8 @@ pub struct Vocabulary {
     exact: std::sync::OnceLock<ExactQuantizer>,
     /// Built on first use.
     tree: std::sync::OnceLock<TreeQuantizer>,
+    /// Signs features within their words; `None` signs every feature 0.
+    hamming: Option<HammingEmbedding>,
 }
 
 enum Backing {
@@ -42,6 +49,43 @@ impl Vocabulary {
             hash,
             exact: std::sync::OnceLock::new(),
             tree: std::sync::OnceLock::new(),
+            hamming: None,
+        }
+    }
+
+    /// A vocabulary from trained centroids, with its Hamming embedding
+    /// learned from (at most 200,000 rows of) the training descriptors.
+    pub fn trained(
+        centroids: Array2<f32>,
+        meta: VocabularyMeta,
+        descriptors: ArrayView2<'_, f32>,
+    ) -> Self {
+        let vocab = Self::from_centroids(centroids, meta);
+        let step = descriptors.nrows().div_ceil(200_000).max(1);
+        let sample = descriptors.slice(ndarray::s![..;step, ..]);
+        let mut words = vec![0u32; sample.nrows()];
+        vocab.exact_quantizer().quantize(sample, &mut words);
+        let he = HammingEmbedding::train(sample, &words, vocab.words(), vocab.meta.seed);
+        vocab.with_hamming(he)
+    }
+
+    /// This vocabulary with `he` as its embedding.
+    pub fn with_hamming(mut self, he: HammingEmbedding) -> Self {
+        self.hamming = Some(he);
+        self
+    }
+
+    /// The Hamming embedding, when the vocabulary has one.
+    pub fn hamming(&self) -> Option<&HammingEmbedding> {
+        self.hamming.as_ref()
+    }
+
+    /// Signatures of `descriptors` quantized to `words` (all 0 without an
+    /// embedding).
+    pub fn sign(&self, descriptors: ArrayView2<'_, f32>, words: &[u32], out: &mut [u64]) {
+        match &self.hamming {
+            Some(he) => he.sign(descriptors, words, out),
+            None => out.fill(0),
         }
     }
 

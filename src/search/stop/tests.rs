@@ -23,7 +23,7 @@ fn stops_at(spec: RuleSpec, stream: &[u32], total: usize, from: usize) -> Option
     voter.set_total(total);
     let mut rule = spec.build(&RuleContext::default());
     for &w in stream {
-        voter.vote(w);
+        voter.vote(w, 0);
         if voter.tally().features >= from && rule.check(&voter).is_some() {
             return Some(voter.tally().features);
         }
@@ -128,7 +128,7 @@ fn lossless_orders_the_whole_top_n() {
         });
     let mut stopped = None;
     for &w in &stream {
-        voter.vote(w);
+        voter.vote(w, 0);
         if rule.check(&voter).is_some() {
             stopped = Some(voter.tally().features);
             break;
@@ -167,11 +167,11 @@ fn rules_that_need_n_wait_while_it_is_unknown() {
     let mut fixed = spec("fixed", 0.5).build(&RuleContext::default());
     voter.set_expected_total(8.0);
     for _ in 0..3 {
-        voter.vote(0);
+        voter.vote(0, 0);
         assert!(lossless.check(&voter).is_none());
         assert!(fixed.check(&voter).is_none());
     }
-    voter.vote(0);
+    voter.vote(0, 0);
     assert!(fixed.check(&voter).is_some(), "4 of about 8 features");
     assert!(lossless.check(&voter).is_none());
     voter.set_total(5);
@@ -308,7 +308,7 @@ fn verified_stop(m: f64, stream: &[u32], check: &mut FakeCheck) -> Option<usize>
     let mut rule = spec("verified", m).build(&RuleContext::default());
     let mut voted = Vec::new();
     for (i, &w) in stream.iter().enumerate() {
-        voter.vote(w);
+        voter.vote(w, 0);
         voted.push((i as u32, w));
         if rule.check_with(&voter, &voted, Some(check)).is_some() {
             return Some(voter.tally().features);
@@ -350,7 +350,7 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
         inliers: 12,
         calls: 0,
     };
-    voter.vote(0);
+    voter.vote(0, 0);
     for _ in 0..3 {
         assert!(rule.check_with(&voter, &[(0, 0)], Some(&mut c)).is_none());
     }
@@ -361,7 +361,7 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     let mut voter = Voter::new(&view);
     let mut rule = spec("verified", 8.0).build(&RuleContext::default());
     for _ in 0..100 {
-        voter.vote(0);
+        voter.vote(0, 0);
         assert!(rule.check_with(&voter, &[(0, 0)], None).is_none());
     }
     assert!(RuleSpec::new("verified", Some(3.0)).is_err());
