@@ -52,7 +52,7 @@ fn vote(c: &mut Criterion) {
                 ..Default::default()
             };
             group.bench_with_input(BenchmarkId::new(rule, images), &images, |b, _| {
-                b.iter(|| search_words(black_box(&map), &query, &options))
+                b.iter(|| search_words(black_box(&map), KnownFeatures::words(&query), &options))
             });
         }
     }

@@ -405,7 +405,7 @@ mod tests {
         assert_eq!(p.queries.len(), 10);
         // about 70 % of each image's (voting) features remain
         let words = map.image_words();
-        assert!((p.queries[0].len() as f64 - 0.7 * words[1].len() as f64).abs() <= 1.0);
+        assert!((p.queries[0].words.len() as f64 - 0.7 * words[1].len() as f64).abs() <= 1.0);
     }
 
     #[test]

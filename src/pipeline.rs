@@ -7,6 +7,7 @@ use crate::features::fit::OpenCvFit;
 use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
 use crate::geometry::Keypoint;
 use crate::geometry::packed::PackedFeature;
+use crate::geometry::matches::QueryFeature;
 use crate::geometry::verify::{LeaderVerifier, VerifyParams, rerank, with_keypoints};
 use crate::index::{ImageWords, MapBuilder, MapIndex, MapRead, Places};
 use crate::live::{LiveMap, Opened};
@@ -452,7 +453,7 @@ impl Localizer {
         &self,
         map: &dyn MapRead,
         answer: Localization,
-        query: &[(u32, Keypoint)],
+        query: &[QueryFeature],
         options: &SearchOptions,
     ) -> Localization {
         let started = Instant::now();

@@ -14,7 +14,7 @@ use bowloc::search::{RuleSpec, SearchOptions, search_words};
 struct Prepared {
     name: String,
     map: bowloc::index::MapIndex,
-    queries: Vec<Vec<u32>>,
+    queries: Vec<bowloc::search::CodedFeatures>,
 }
 
 fn prepare(dataset: &str, words: usize) -> Prepared {
@@ -51,8 +51,8 @@ fn check(p: &Prepared) {
     let (mut conf_used, mut conf_total) = (0usize, 0usize);
     for seed in 0..SEEDS {
         for (q, words) in p.queries.iter().enumerate() {
-            let full = search_words(&p.map, words, &options("none", None, seed, 5));
-            let lossless = search_words(&p.map, words, &options("lossless", None, seed, 5));
+            let full = search_words(&p.map, words.known(), &options("none", None, seed, 5));
+            let lossless = search_words(&p.map, words.known(), &options("lossless", None, seed, 5));
             let ids = |o: &bowloc::search::SearchOutcome| {
                 o.candidates.iter().map(|c| c.id).collect::<Vec<_>>()
             };
@@ -64,8 +64,8 @@ fn check(p: &Prepared) {
             );
             used += lossless.features_used;
             total += lossless.features_total;
-            let full1 = search_words(&p.map, words, &options("none", None, seed, 1));
-            let lossless1 = search_words(&p.map, words, &options("lossless", None, seed, 1));
+            let full1 = search_words(&p.map, words.known(), &options("none", None, seed, 1));
+            let lossless1 = search_words(&p.map, words.known(), &options("lossless", None, seed, 1));
             assert_eq!(
                 ids(&lossless1),
                 ids(&full1),
@@ -75,7 +75,7 @@ fn check(p: &Prepared) {
             used1 += lossless1.features_used;
             total1 += lossless1.features_total;
 
-            let conf = search_words(&p.map, words, &options("confident", Some(DELTA), seed, 1));
+            let conf = search_words(&p.map, words.known(), &options("confident", Some(DELTA), seed, 1));
             if full.candidates.is_empty() {
                 continue;
             }

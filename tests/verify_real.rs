@@ -6,6 +6,7 @@ mod common;
 
 use bowloc::features::fit::OpenCvFit;
 use bowloc::geometry::Keypoint;
+use bowloc::geometry::matches::QueryFeature;
 use bowloc::geometry::verify::{VerifyParams, rerank};
 use bowloc::pipeline::{Localizer, words_per_image};
 use bowloc::search::{RuleSpec, SearchOptions, permute, search_words};
@@ -45,7 +46,7 @@ fn verification_raises_recall_at_1_of_an_early_stopped_search() {
                 seed,
                 ..Default::default()
             };
-            let outcome = search_words(&map, words, &options);
+            let outcome = search_words(&map, words.known(), &options);
             if outcome
                 .candidates
                 .first()
@@ -54,10 +55,14 @@ fn verification_raises_recall_at_1_of_an_early_stopped_search() {
                 by_votes += 1;
             }
             let keypoints: &[Keypoint] = features.as_ref().map_or(&[], |f| &f.keypoints);
-            let seen: Vec<(u32, Keypoint)> = permute::permutation(words.len(), seed)
+            let seen: Vec<QueryFeature> = permute::permutation(words.words.len(), seed)
                 [..outcome.features_used]
                 .iter()
-                .map(|&i| (words[i as usize], keypoints[i as usize]))
+                .map(|&i| QueryFeature {
+                    word: words.words[i as usize],
+                    signature: words.signatures[i as usize],
+                    keypoint: keypoints[i as usize],
+                })
                 .collect();
             let votes: Vec<(u32, f32)> =
                 outcome.candidates.iter().map(|c| (c.id, c.score)).collect();

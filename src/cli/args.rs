@@ -276,6 +276,10 @@ pub struct VerifyArgs {
     /// Skip words giving more (query, map) pairs than this between two images.
     #[arg(long, default_value_t = VerifyParams::default().max_word_pairs)]
     pub max_word_pairs: usize,
+    /// Pair two features of a word only when their Hamming signatures differ
+    /// in at most this many bits (64: every pair).
+    #[arg(long, default_value_t = VerifyParams::default().max_hamming)]
+    pub max_hamming: u32,
     /// Geometric model: homography or fundamental.
     #[arg(long, default_value = "homography")]
     pub model: Model,
@@ -297,6 +301,7 @@ impl VerifyArgs {
             top_k: self.verify_top_k,
             min_inliers: self.min_inliers,
             max_word_pairs: self.max_word_pairs,
+            max_hamming: self.max_hamming,
             model: self.model,
             estimator: self.estimator,
             threshold_px: self.inlier_px,

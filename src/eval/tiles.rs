@@ -206,7 +206,7 @@ struct CpuTimed<C> {
 }
 
 impl<C: search::LeaderCheck> search::LeaderCheck for CpuTimed<C> {
-    fn inliers(&mut self, image: u32, voted: &[(u32, u32)]) -> usize {
+    fn inliers(&mut self, image: u32, voted: &[search::Voted]) -> usize {
         let started = ThreadTime::now();
         let inliers = self.inner.inliers(image, voted);
         self.spent += started.elapsed();

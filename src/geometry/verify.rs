@@ -7,10 +7,10 @@
 //! for every query whatever the stop point.
 
 use super::Keypoint;
-use super::matches::{Correspondences, QueryFeatures, tentative};
+use super::matches::{Correspondences, QueryFeature, QueryFeatures, tentative};
 use super::packed::PackedFeature;
 use crate::index::MapRead;
-use crate::search::LeaderCheck;
+use crate::search::{LeaderCheck, Voted};
 use serde::{Deserialize, Serialize};
 
 /// The geometric model fitted to the correspondences.
@@ -106,6 +106,9 @@ pub struct VerifyParams {
     pub min_inliers: usize,
     /// A word giving more pairs than this between the two images is skipped.
     pub max_word_pairs: usize,
+    /// Features whose Hamming signatures differ in more bits than this do
+    /// not pair up (64: every pair of a word).
+    pub max_hamming: u32,
     pub model: Model,
     pub estimator: Estimator,
     /// See [`FitParams::threshold_px`].
@@ -125,6 +128,7 @@ impl Default for VerifyParams {
             top_k: 10,
             min_inliers: 12,
             max_word_pairs: 4,
+            max_hamming: 64,
             model: Model::Homography,
             estimator: Estimator::Magsac,
             threshold_px: 8.0,
@@ -284,7 +288,7 @@ pub fn verify_features(
     fit: &dyn ModelFit,
     params: &VerifyParams,
 ) -> (Verification, Correspondences) {
-    let c = tentative(query, map_features, params.max_word_pairs);
+    let c = tentative(query, map_features, params.max_word_pairs, params.max_hamming);
     fit_inliers(&c, fit, params.min_inliers)
 }
 
@@ -294,7 +298,7 @@ pub fn verify_features(
 pub fn verify_leader(
     map: &dyn MapRead,
     leader: u32,
-    query_so_far: &[(u32, Keypoint)],
+    query_so_far: &[QueryFeature],
     fit: &dyn ModelFit,
     params: &VerifyParams,
 ) -> Verification {
@@ -319,18 +323,24 @@ pub struct LeaderVerifier<'a> {
 }
 
 impl LeaderCheck for LeaderVerifier<'_> {
-    fn inliers(&mut self, image: u32, voted: &[(u32, u32)]) -> usize {
+    fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize {
         let query = with_keypoints(voted, self.keypoints);
         verify_leader(self.map, image, &query, self.fit, self.params).inliers
     }
 }
 
-/// The features voted, as (word, keypoint): `voted` holds (feature number,
-/// word) pairs, `keypoints` every feature's keypoint by number.
-pub fn with_keypoints(voted: &[(u32, u32)], keypoints: &[Keypoint]) -> Vec<(u32, Keypoint)> {
+/// The features voted, with their keypoints (`keypoints` holds every
+/// feature's keypoint by number).
+pub fn with_keypoints(voted: &[Voted], keypoints: &[Keypoint]) -> Vec<QueryFeature> {
     voted
         .iter()
-        .filter_map(|&(i, w)| keypoints.get(i as usize).map(|k| (w, *k)))
+        .filter_map(|v| {
+            keypoints.get(v.feature as usize).map(|k| QueryFeature {
+                word: v.word,
+                signature: v.signature,
+                keypoint: *k,
+            })
+        })
         .collect()
 }
 
@@ -358,7 +368,7 @@ impl Reranked {
 pub fn rerank(
     map: &dyn MapRead,
     candidates: &[(u32, f32)],
-    query: &[(u32, Keypoint)],
+    query: &[QueryFeature],
     fit: &dyn ModelFit,
     params: &VerifyParams,
 ) -> Vec<Reranked> {
@@ -453,7 +463,7 @@ mod tests {
         b.add(ImageWords::with_geometry("a", &words, &[], &kps));
         b.add(ImageWords::with_geometry("b", &other, &[], &kps));
         let map = b.build("m", "v", None);
-        let query: Vec<(u32, Keypoint)> = words.iter().map(|&w| (w, kp(w))).collect();
+        let query: Vec<QueryFeature> = words.iter().map(|&w| (w, kp(w)).into()).collect();
         let fit = AllInliers(VerifyParams::default().fit());
         let out = rerank(
             &map,

@@ -9,7 +9,8 @@ use std::path::Path;
 
 const MAGIC: [u8; 8] = *b"BOWLOCMA";
 /// 2: per-image geometry (`geometry.offsets`, `geometry.features`).
-const VERSION: u32 = 2;
+/// 3: each stored feature carries its Hamming signature (20 bytes).
+const VERSION: u32 = 3;
 
 /// What a map is.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -90,7 +91,8 @@ pub(super) fn open(path: &Path, verify: bool) -> Result<MapIndex, StoreError> {
                 path: path.to_path_buf(),
                 detail: format!(
                     "map format version {found} is older than this build's version {VERSION} \
-                     (which adds the geometry that verification needs); rebuild the map with \
+                     (which stores each feature's keypoint and Hamming signature, for \
+                     verification and vote weighing); rebuild the map with \
                      `bowloc map build --vocab VOCAB --images IMAGES --out MAP`"
                 ),
             });

@@ -22,7 +22,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 const MAGIC: [u8; 8] = *b"BOWLOCLG";
-const VERSION: u32 = 1;
+/// 2: each feature carries its Hamming signature (20 bytes).
+const VERSION: u32 = 2;
 /// Bytes of the header.
 pub const HEADER_LEN: usize = 24;
 /// Largest payload a record may have.

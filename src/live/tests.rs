@@ -2,7 +2,7 @@ use super::*;
 use crate::geometry::Keypoint;
 use crate::geometry::packed::pack_image;
 use crate::index::{ImageWords, MapBuilder, MapRead};
-use crate::search::{RuleSpec, SearchOptions, search_words};
+use crate::search::{KnownFeatures, RuleSpec, SearchOptions, search_words};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -111,7 +111,7 @@ fn answers(map: &dyn MapRead, queries: &[Vec<u32>]) -> Vec<Vec<(String, f32)>> {
     queries
         .iter()
         .map(|q| {
-            search_words(map, q, &options)
+            search_words(map, KnownFeatures::words(q), &options)
                 .candidates
                 .iter()
                 .map(|c| (map.image(c.id).name.to_owned(), c.score))

@@ -102,6 +102,16 @@ impl SearchOptions {
     }
 }
 
+/// One feature as it was voted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Voted {
+    /// Its number over all batches (tiles) of the query.
+    pub feature: u32,
+    pub word: u32,
+    /// Its Hamming signature (0 without an embedding).
+    pub signature: u64,
+}
+
 /// Why the search ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -182,9 +192,8 @@ pub struct Search<'m> {
     stop: Option<(StopKind, String)>,
     batches: u64,
     fed: usize,
-    /// (feature number over all batches, word) of every feature voted, in
-    /// voting order.
-    voted: Vec<(u32, u32)>,
+    /// Every feature voted, in voting order.
+    voted: Vec<Voted>,
     trace: Option<Trace>,
 }
 
@@ -243,7 +252,7 @@ impl<'m> Search<'m> {
     }
 
     /// (feature number over all batches, word) of each feature voted so far.
-    pub fn voted(&self) -> &[(u32, u32)] {
+    pub fn voted(&self) -> &[Voted] {
         &self.voted
     }
 
@@ -292,7 +301,11 @@ impl<'m> Search<'m> {
             let batch = self.words[..indices.len()].iter().zip(&self.signatures);
             for (&i, (&w, &signature)) in indices.iter().zip(batch) {
                 self.voter.vote(w, signature);
-                self.voted.push((offset + i, w));
+                self.voted.push(Voted {
+                    feature: offset + i,
+                    word: w,
+                    signature,
+                });
                 let features = self.voter.tally().features;
                 let why = if features < self.options.min_features {
                     None
@@ -503,7 +516,7 @@ pub fn search_tiles(
     tiles: &[(KnownFeatures<'_>, f64)],
     options: &SearchOptions,
     mut leader_check: Option<&mut dyn LeaderCheck>,
-) -> (SearchOutcome, Vec<(u32, u32)>, usize) {
+) -> (SearchOutcome, Vec<Voted>, usize) {
     let mut s = Search::new(map, options);
     let mut share = 0.0;
     let mut used = 0;

@@ -92,7 +92,7 @@ fn full_bow_ranking_equals_brute_force_tfidf_cosine() {
                 }
             })
             .collect();
-        let got = search_words(&map, &query, &opts("none", None, q as u64));
+        let got = search_words(&map, KnownFeatures::words(&query), &opts("none", None, q as u64));
         assert_eq!(got.features_used, query.len());
         assert_eq!(got.stop.kind, StopKind::Exhausted);
         let want = brute_force(&lists, &query);
@@ -117,7 +117,7 @@ fn full_bow_ranking_equals_brute_force_tfidf_cosine() {
 fn same_seed_same_outcome_different_seeds_differ() {
     let (map, lists) = random_map(40, 3);
     let query = &lists[5];
-    let run = |seed| search_words(&map, query, &opts("stable-peak", Some(8.0), seed));
+    let run = |seed| search_words(&map, KnownFeatures::words(query), &opts("stable-peak", Some(8.0), seed));
     let a = run(7);
     let b = run(7);
     assert_eq!(a.candidates, b.candidates);
@@ -130,7 +130,7 @@ fn same_seed_same_outcome_different_seeds_differ() {
 fn stop_point_does_not_depend_on_block_size() {
     let (map, lists) = random_map(40, 4);
     let query = &lists[9];
-    let reference = search_words(&map, query, &opts("fixed", Some(0.37), 5));
+    let reference = search_words(&map, KnownFeatures::words(query), &opts("fixed", Some(0.37), 5));
     assert_eq!(
         reference.features_used,
         (0.37 * query.len() as f64).ceil() as usize
@@ -140,7 +140,7 @@ fn stop_point_does_not_depend_on_block_size() {
             block,
             ..opts("fixed", Some(0.37), 5)
         };
-        let got = search_words(&map, query, &o);
+        let got = search_words(&map, KnownFeatures::words(query), &o);
         assert_eq!(got.features_used, reference.features_used, "block {block}");
         assert_eq!(got.candidates, reference.candidates, "block {block}");
     }
@@ -150,7 +150,7 @@ fn stop_point_does_not_depend_on_block_size() {
 fn early_scores_are_unbiased_estimates_of_full_scores() {
     let (map, lists) = random_map(30, 6);
     let query = &lists[2];
-    let full = search_words(&map, query, &opts("none", None, 0));
+    let full = search_words(&map, KnownFeatures::words(query), &opts("none", None, 0));
     let target = full.candidates[0];
     let runs = 3000;
     let mut sum = 0.0f64;
@@ -159,7 +159,7 @@ fn early_scores_are_unbiased_estimates_of_full_scores() {
             top_n: 30,
             ..opts("fixed", Some(0.5), seed)
         };
-        let got = search_words(&map, query, &o);
+        let got = search_words(&map, KnownFeatures::words(query), &o);
         sum += got
             .candidates
             .iter()
@@ -191,8 +191,8 @@ fn descriptor_search_equals_search_over_precomputed_words() {
         ("stable-peak", Some(10.0)),
     ] {
         let o = opts(rule.0, rule.1, 11);
-        let a = search(&q, &map, desc.view(), &o);
-        let b = search_words(&map, &words, &o);
+        let a = search(&q, None, &map, desc.view(), &o);
+        let b = search_words(&map, KnownFeatures::words(&words), &o);
         assert_eq!(a.candidates, b.candidates, "{rule:?}");
         assert_eq!(a.stop, b.stop, "{rule:?}");
     }
@@ -205,12 +205,12 @@ fn passed_deadline_and_empty_query_are_defined() {
         deadline: Some(Instant::now()),
         ..opts("none", None, 1)
     };
-    let got = search_words(&map, &lists[0], &o);
+    let got = search_words(&map, KnownFeatures::words(&lists[0]), &o);
     assert_eq!(got.stop.kind, StopKind::Deadline);
     assert_eq!(got.features_used, 0);
     assert!(got.candidates.is_empty());
 
-    let got = search_words(&map, &[], &opts("peak-mean", Some(0.1), 1));
+    let got = search_words(&map, KnownFeatures::words(&[]), &opts("peak-mean", Some(0.1), 1));
     assert_eq!(got.stop.kind, StopKind::Exhausted);
     assert_eq!(got.features_total, 0);
     assert_eq!(got.fraction_used(), 1.0);
@@ -221,13 +221,13 @@ fn passed_deadline_and_empty_query_are_defined() {
 fn min_features_delays_the_rule() {
     let (map, lists) = random_map(20, 12);
     let query = &lists[3];
-    let eager = search_words(&map, query, &opts("stable-peak", Some(0.0), 1));
+    let eager = search_words(&map, KnownFeatures::words(query), &opts("stable-peak", Some(0.0), 1));
     assert_eq!(eager.features_used, 1);
     let o = SearchOptions {
         min_features: 15,
         ..opts("stable-peak", Some(0.0), 1)
     };
-    assert_eq!(search_words(&map, query, &o).features_used, 15);
+    assert_eq!(search_words(&map, KnownFeatures::words(query), &o).features_used, 15);
 }
 
 /// A traced search: the same answer as untraced, a bounded race whose last
@@ -260,10 +260,11 @@ fn traces_record_the_race_without_changing_it() {
                 s = s.trace(1, 64);
             }
             for (k, words) in tiles.iter().enumerate() {
-                let quantize = |indices: &[u32], out: &mut [u32]| {
+                let quantize = |indices: &[u32], out: &mut [u32], signed: &mut [u64]| {
                     for (o, &i) in out.iter_mut().zip(indices) {
                         *o = words[i as usize];
                     }
+                    signed.fill(0);
                 };
                 let share = (k + 1) as f64 / tiles.len() as f64;
                 if s.feed_tile(words.len(), share, k + 1 == tiles.len(), quantize, None) {
@@ -325,7 +326,7 @@ fn the_frame_posterior_is_the_posterior_under_a_uniform_prior() {
     let with = |prior: Prior| {
         search_words(
             &map,
-            query,
+            KnownFeatures::words(query),
             &SearchOptions {
                 prior: Some(Arc::new(prior)),
                 ..opts("none", None, 3)

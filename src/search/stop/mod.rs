@@ -14,6 +14,7 @@ mod relative;
 mod stable_peak;
 mod verified;
 
+use super::Voted;
 use super::prior::Prior;
 use super::vote::{Needs, VoteStats};
 use serde::{Deserialize, Serialize};
@@ -38,12 +39,12 @@ pub trait StopRule: Send {
     }
 
     /// [`check`](Self::check) with what a geometric rule needs besides the
-    /// votes: the (feature, word) pairs voted so far and a way to check a
+    /// votes: the features voted so far and a way to check a
     /// candidate against them. Vote rules ignore both.
     fn check_with(
         &mut self,
         voter: &dyn VoteStats,
-        voted: &[(u32, u32)],
+        voted: &[Voted],
         leader_check: Option<&mut dyn LeaderCheck>,
     ) -> Option<String> {
         let _ = (voted, leader_check);
@@ -52,11 +53,11 @@ pub trait StopRule: Send {
 }
 
 /// A geometric check of a map image against the query features voted so
-/// far, given as (feature number, word) pairs: how many of them are inliers
+/// far: how many of them are inliers
 /// of a model relating the two images. Implemented outside the core (the
 /// model fit is OpenCV's).
 pub trait LeaderCheck {
-    fn inliers(&mut self, image: u32, voted: &[(u32, u32)]) -> usize;
+    fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize;
 }
 
 /// What a rule may know about the search it runs in.

@@ -286,6 +286,13 @@ fn every_registered_rule_has_a_unique_name() {
     assert_eq!(names.len(), RULES.len());
 }
 
+/// Feature 0, word 0.
+const VOTED_0: Voted = Voted {
+    feature: 0,
+    word: 0,
+    signature: 0,
+};
+
 /// A geometric check that finds `inliers` for image 0 and none elsewhere,
 /// counting its calls.
 struct FakeCheck {
@@ -294,7 +301,7 @@ struct FakeCheck {
 }
 
 impl LeaderCheck for FakeCheck {
-    fn inliers(&mut self, image: u32, voted: &[(u32, u32)]) -> usize {
+    fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize {
         self.calls += 1;
         assert!(!voted.is_empty());
         if image == 0 { self.inliers } else { 0 }
@@ -309,7 +316,11 @@ fn verified_stop(m: f64, stream: &[u32], check: &mut FakeCheck) -> Option<usize>
     let mut voted = Vec::new();
     for (i, &w) in stream.iter().enumerate() {
         voter.vote(w, 0);
-        voted.push((i as u32, w));
+        voted.push(Voted {
+            feature: i as u32,
+            word: w,
+            signature: 0,
+        });
         if rule.check_with(&voter, &voted, Some(check)).is_some() {
             return Some(voter.tally().features);
         }
@@ -352,7 +363,7 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     };
     voter.vote(0, 0);
     for _ in 0..3 {
-        assert!(rule.check_with(&voter, &[(0, 0)], Some(&mut c)).is_none());
+        assert!(rule.check_with(&voter, &[VOTED_0], Some(&mut c)).is_none());
     }
     assert_eq!(c.calls, 1);
     // without a check the rule never stops
@@ -362,7 +373,7 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     let mut rule = spec("verified", 8.0).build(&RuleContext::default());
     for _ in 0..100 {
         voter.vote(0, 0);
-        assert!(rule.check_with(&voter, &[(0, 0)], None).is_none());
+        assert!(rule.check_with(&voter, &[VOTED_0], None).is_none());
     }
     assert!(RuleSpec::new("verified", Some(3.0)).is_err());
     assert!(RuleSpec::new("verified", Some(8.5)).is_err());

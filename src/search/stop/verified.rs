@@ -14,6 +14,7 @@
 //! same votes.
 
 use super::{Grid, LeaderCheck, Parameter, Range, RuleInfo, StopRule, VoteStats};
+use crate::search::Voted;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "verified",
@@ -53,7 +54,7 @@ impl StopRule for Verified {
     fn check_with(
         &mut self,
         voter: &dyn VoteStats,
-        voted: &[(u32, u32)],
+        voted: &[Voted],
         leader_check: Option<&mut dyn LeaderCheck>,
     ) -> Option<String> {
         let t = voter.tally();
