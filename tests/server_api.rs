@@ -281,9 +281,9 @@ async fn the_trace_follows_the_race_to_the_stop_and_the_full_search_to_the_end()
             serde_json::from_slice::<serde_json::Value>(&body).unwrap()
         }
     };
-    let plain = answer("seed=3&rule=peak-mean&threshold=20&tiles=2x2").await;
+    let plain = answer("seed=3&rule=peak-mean&threshold=1&tiles=2x2").await;
     assert!(plain.get("trace").is_none(), "no trace unless asked");
-    let traced = answer("seed=3&rule=peak-mean&threshold=20&tiles=2x2&trace=full").await;
+    let traced = answer("seed=3&rule=peak-mean&threshold=1&tiles=2x2&trace=full").await;
     // tracing changes nothing of the answer
     for key in ["candidates", "features", "stop", "tiles"] {
         assert_eq!(plain[key], traced[key], "{key}");
@@ -296,10 +296,10 @@ async fn the_trace_follows_the_race_to_the_stop_and_the_full_search_to_the_end()
     let last = points.last().unwrap();
     assert_eq!(traced["stop"]["kind"], "rule");
     assert!(last["statistic"].as_f64().unwrap() > last["threshold"].as_f64().unwrap());
-    assert_eq!(last["threshold"].as_f64().unwrap(), 20.0);
+    assert_eq!(last["threshold"].as_f64().unwrap(), 1.0);
     // before the stop the statistic had not passed the threshold
     for p in &points[..points.len() - 1] {
-        assert!(p["statistic"].as_f64().unwrap() <= 20.0, "{p}");
+        assert!(p["statistic"].as_f64().unwrap() <= 1.0, "{p}");
         assert!(p["leader_votes"].as_f64() >= p["runner_up_votes"].as_f64());
     }
     let full = &t["full"];

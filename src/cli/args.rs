@@ -1,7 +1,7 @@
 //! Argument groups shared by several subcommands.
 
 use bowloc::features::{ExtractConfig, SiftParams};
-use bowloc::geometry::verify::{Estimator, Model, VerifyParams};
+use bowloc::geometry::verify::{Estimator, Model, Order, VerifyParams};
 use bowloc::search::SearchOptions;
 use bowloc::search::stop::{GENERIC_PARAMETER, RULES, parse_rule};
 use bowloc::sequence::{Motion, SequenceModel};
@@ -280,6 +280,10 @@ pub struct VerifyArgs {
     /// in at most this many bits (64: every pair).
     #[arg(long, default_value_t = VerifyParams::default().max_hamming)]
     pub max_hamming: u32,
+    /// Order of the verified candidates: inliers (most first) or verified
+    /// (those with at least --min-inliers first, each group in vote order).
+    #[arg(long, default_value = "inliers")]
+    pub verify_order: Order,
     /// Geometric model: homography or fundamental.
     #[arg(long, default_value = "homography")]
     pub model: Model,
@@ -302,6 +306,7 @@ impl VerifyArgs {
             min_inliers: self.min_inliers,
             max_word_pairs: self.max_word_pairs,
             max_hamming: self.max_hamming,
+            order: self.verify_order,
             model: self.model,
             estimator: self.estimator,
             threshold_px: self.inlier_px,

@@ -33,6 +33,29 @@ pub enum Estimator {
     Magsac,
 }
 
+/// How verification orders the candidates it checked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Order {
+    /// By inliers, most first (equal counts in vote order).
+    Inliers,
+    /// The verified candidates (at least `min_inliers`) first, then the
+    /// others, each group in vote order: a vote leader that verifies stays
+    /// first, and one that does not gives way to the best-voted one that does.
+    Verified,
+}
+
+impl std::str::FromStr for Order {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "inliers" => Ok(Self::Inliers),
+            "verified" => Ok(Self::Verified),
+            _ => Err(format!("unknown order `{s}`; use inliers or verified")),
+        }
+    }
+}
+
 impl std::str::FromStr for Model {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
@@ -109,6 +132,8 @@ pub struct VerifyParams {
     /// Features whose Hamming signatures differ in more bits than this do
     /// not pair up (64: every pair of a word).
     pub max_hamming: u32,
+    /// How the checked candidates are ordered.
+    pub order: Order,
     pub model: Model,
     pub estimator: Estimator,
     /// See [`FitParams::threshold_px`].
@@ -129,6 +154,7 @@ impl Default for VerifyParams {
             min_inliers: 12,
             max_word_pairs: 4,
             max_hamming: 64,
+            order: Order::Inliers,
             model: Model::Homography,
             estimator: Estimator::Magsac,
             threshold_px: 8.0,
@@ -392,8 +418,12 @@ pub fn rerank(
             }
         })
         .collect();
-    // stable: equal inliers keep vote order
-    out[..k].sort_by_key(|r| std::cmp::Reverse(r.verification.map_or(0, |v| v.inliers)));
+    // stable: equal keys keep vote order
+    match params.order {
+        Order::Inliers => out[..k]
+            .sort_by_key(|r| std::cmp::Reverse(r.verification.map_or(0, |v| v.inliers))),
+        Order::Verified => out[..k].sort_by_key(|r| !r.verification.is_some_and(|v| v.verified)),
+    }
     out
 }
 
