@@ -26,8 +26,8 @@ cargo build --release
 B=./target/release/bowloc
 D=../shared/datasets
 # settings run besides the grids, to see whether one carries over between maps
-sets=(--set relative=2@100 --set relative=2.5@100
-      --set peak-mean=8@20 --set verified=12)
+sets=(--set peak-mean=1.6@100 --set relative=2.5@100
+      --set verified=8 --set verified=12)
 for run in gardens-point:5000 rtabmap-loop:1000; do
   name=${run%%:*}
   words=${run##*:}

@@ -153,7 +153,7 @@ impl Default for VerifyParams {
             top_k: 10,
             min_inliers: 12,
             max_word_pairs: 4,
-            max_hamming: 64,
+            max_hamming: 16,
             order: Order::Inliers,
             model: Model::Homography,
             estimator: Estimator::Magsac,

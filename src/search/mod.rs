@@ -85,13 +85,13 @@ impl Default for SearchOptions {
 
 impl SearchOptions {
     /// The rule every front end uses unless told otherwise.
-    pub const RECOMMENDED_RULE: &'static str = "relative";
+    pub const RECOMMENDED_RULE: &'static str = "peak-mean";
     /// Its parameter.
-    pub const RECOMMENDED_PARAMETER: f64 = 2.5;
+    pub const RECOMMENDED_PARAMETER: f64 = 1.6;
 
     /// The settings the service, the CLI and the configuration default to:
     /// the rule, parameter and warm-up chosen by evaluation
-    /// (docs/results.md, "Recommended server defaults").
+    /// (docs/results.md, "The default rule").
     pub fn recommended() -> Self {
         Self {
             rule: RuleSpec::new(Self::RECOMMENDED_RULE, Some(Self::RECOMMENDED_PARAMETER))
