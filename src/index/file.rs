@@ -80,6 +80,7 @@ pub(super) fn view(store: &Store) -> Result<MapView<'_>, StoreError> {
         geometry_offsets: store.u64s("geometry.offsets")?,
         geometry: bytemuck::try_cast_slice(store.u32s("geometry.features")?)
             .map_err(|_| store.invalid("geometry.features is not whole features"))?,
+        feature_runs: &[],
         overlay: None,
     })
 }
@@ -148,6 +149,7 @@ pub(super) fn open(path: &Path, verify: bool) -> Result<MapIndex, StoreError> {
     Ok(MapIndex {
         backing: Backing::Mapped(store),
         meta,
+        runs: Default::default(),
     })
 }
 

@@ -27,6 +27,8 @@ use crate::store::{Store, StoreError};
 pub struct MapIndex {
     backing: Backing,
     meta: MapMeta,
+    /// Built on first use: see [`MapView::feature_runs`].
+    runs: std::sync::OnceLock<Vec<[u32; 2]>>,
 }
 
 /// The arrays of an in-memory map.
@@ -63,6 +65,11 @@ pub struct MapView<'a> {
     pub poses: &'a [f64],
     pub geometry_offsets: &'a [u64],
     pub geometry: &'a [PackedFeature],
+    /// For postings entry e (word w, image j): j's features of word w are
+    /// `geometry[start..start + len]`, `[start, len] = feature_runs[e]`. What
+    /// a vote weighed by signatures reads; empty where not built (the voter
+    /// then searches the image's features).
+    pub feature_runs: &'a [[u32; 2]],
     /// Images added and removed since the file was written (none for a
     /// map file on its own).
     pub overlay: Option<&'a Overlay>,
@@ -135,6 +142,7 @@ impl MapIndex {
         Self {
             backing: Backing::Owned(Box::new(arrays)),
             meta,
+            runs: Default::default(),
         }
     }
 
@@ -180,7 +188,15 @@ impl MapIndex {
     }
 
     /// All arrays, borrowed (a handful of lookups: take it once per query).
+    /// The first call also indexes the features' runs by postings entry
+    /// (time and 8 bytes per entry, once).
     pub fn view(&self) -> MapView<'_> {
+        let mut view = self.arrays();
+        view.feature_runs = self.runs.get_or_init(|| feature_runs(&view));
+        view
+    }
+
+    fn arrays(&self) -> MapView<'_> {
         match &self.backing {
             Backing::Owned(a) => MapView {
                 idf: &a.idf,
@@ -191,6 +207,7 @@ impl MapIndex {
                 poses: &a.poses,
                 geometry_offsets: &a.geometry_offsets,
                 geometry: &a.geometry,
+                feature_runs: &[],
                 overlay: None,
             },
             Backing::Mapped(store) => file::view(store).expect("validated on load"),
@@ -199,14 +216,14 @@ impl MapIndex {
 
     /// Name, place label and pose of map image `id`.
     pub fn image(&self, id: u32) -> ImageInfo<'_> {
-        let view = self.view();
+        let view = self.arrays();
         metadata::image_info(&view, &self.meta.pose_fields, id)
     }
 
     /// The stored features of map image `id`, sorted by word (empty for an
     /// image without features or an unknown id).
     pub fn geometry(&self, id: u32) -> &[PackedFeature] {
-        let v = self.view();
+        let v = self.arrays();
         let j = id as usize;
         match (v.geometry_offsets.get(j), v.geometry_offsets.get(j + 1)) {
             (Some(&a), Some(&b)) => &v.geometry[a as usize..b as usize],
@@ -277,4 +294,34 @@ impl MapIndex {
     pub fn save(&self, path: &std::path::Path) -> Result<(), StoreError> {
         file::save(self, path)
     }
+}
+
+/// [`MapView::feature_runs`] of `view`'s postings and geometry. Each image's
+/// features are sorted by word and each word's postings list images in
+/// ascending order, so one pass over the images in order fills every entry.
+/// An entry whose image stores no features of its word gets an empty run.
+fn feature_runs(view: &MapView<'_>) -> Vec<[u32; 2]> {
+    let (offsets, images, _) = view.postings.raw();
+    if view.geometry.is_empty() || view.geometry.len() > u32::MAX as usize {
+        return Vec::new();
+    }
+    let mut runs = vec![[0u32; 2]; images.len()];
+    let mut cursor: Vec<u64> = offsets.iter().take(offsets.len().saturating_sub(1)).copied().collect();
+    for (j, bounds) in view.geometry_offsets.windows(2).enumerate() {
+        let (mut at, end) = (bounds[0] as usize, bounds[1] as usize);
+        while at < end {
+            let word = view.geometry[at].word;
+            let len = view.geometry[at..end].iter().take_while(|f| f.word == word).count();
+            let list_end = offsets.get(word as usize + 1).copied().unwrap_or(0);
+            if let Some(c) = cursor.get_mut(word as usize) {
+                let e = *c as usize;
+                if *c < list_end && images.get(e) == Some(&(j as u32)) {
+                    runs[e] = [at as u32, len as u32];
+                    *c += 1;
+                }
+            }
+            at += len;
+        }
+    }
+    runs
 }

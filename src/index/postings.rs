@@ -49,6 +49,13 @@ impl<'a> Postings<'a> {
         }
     }
 
+    /// Where word `w`'s entries start among all entries (0 for an unknown
+    /// word).
+    #[inline]
+    pub fn start(&self, w: u32) -> usize {
+        self.offsets.get(w as usize).map_or(0, |&a| a as usize)
+    }
+
     pub(crate) fn raw(&self) -> (&'a [u64], &'a [u32], &'a [f32]) {
         (self.offsets, self.images, self.weights)
     }

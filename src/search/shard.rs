@@ -54,6 +54,7 @@ impl Shard {
             poses: &[],
             geometry_offsets: &[],
             geometry: &[],
+            feature_runs: &[],
             overlay: None,
         }
     }

@@ -240,9 +240,11 @@ pub struct Voter<'a> {
     tally: Tally,
     /// g(distance), when votes are weighed by signatures.
     hamming: Option<[f32; BITS + 1]>,
-    /// The file's images' features (sorted by word), by image.
+    /// The file's images' features (sorted by word), by image, and each
+    /// postings entry's run of them.
     geometry_offsets: &'a [u64],
     geometry: &'a [PackedFeature],
+    feature_runs: &'a [[u32; 2]],
     /// Where the added images' features are read.
     added_geometry: Option<&'a dyn MapRead>,
 }
@@ -282,6 +284,7 @@ impl<'a> Voter<'a> {
             hamming: None,
             geometry_offsets: map.geometry_offsets,
             geometry: map.geometry,
+            feature_runs: map.feature_runs,
             added_geometry: None,
         }
     }
@@ -294,19 +297,31 @@ impl<'a> Voter<'a> {
         self
     }
 
-    /// Mean g(distance) between `signature` and image j's features of word
-    /// `w`; 1 without weights, or for an image whose features are not stored.
+    /// Image j's features of word `w`: the run of postings entry `entry` of
+    /// the file when indexed, else found among the image's features.
     #[inline]
-    fn agreement(&self, j: u32, w: u32, signature: u64) -> f32 {
-        let Some(table) = &self.hamming else {
-            return 1.0;
-        };
+    fn run(&self, entry: Option<usize>, j: u32, w: u32) -> &'a [PackedFeature] {
+        if let Some(&[start, len]) = entry.and_then(|e| self.feature_runs.get(e)) {
+            let start = start as usize;
+            return self.geometry.get(start..start + len as usize).unwrap_or(&[]);
+        }
         let j = j as usize;
         let features = match (self.geometry_offsets.get(j), self.geometry_offsets.get(j + 1)) {
             (Some(&a), Some(&b)) => self.geometry.get(a as usize..b as usize).unwrap_or(&[]),
             _ => self.added_geometry.map_or(&[][..], |m| m.geometry(j as u32)),
         };
-        let run = word_run(features, w);
+        word_run(features, w)
+    }
+
+    /// Mean g(distance) between `signature` and image j's features of word
+    /// `w` (`entry`: its postings entry in the file, if it is one); 1 without
+    /// weights, or for an image whose features are not stored.
+    #[inline]
+    fn agreement(&self, entry: Option<usize>, j: u32, w: u32, signature: u64) -> f32 {
+        let Some(table) = &self.hamming else {
+            return 1.0;
+        };
+        let run = self.run(entry, j, w);
         if run.is_empty() {
             return 1.0;
         }
@@ -347,9 +362,10 @@ impl<'a> Voter<'a> {
                 added += self.cast(j, factor * d);
             }
         } else {
-            for (&j, &d) in images.iter().zip(weights) {
+            let start = self.postings.start(w);
+            for (k, (&j, &d)) in images.iter().zip(weights).enumerate() {
                 if !is_set(self.removed, j) {
-                    let a = self.agreement(j, w, signature);
+                    let a = self.agreement(Some(start + k), j, w, signature);
                     added += self.cast(j, factor * d * a);
                 }
             }
@@ -357,7 +373,7 @@ impl<'a> Voter<'a> {
         if let Some(flat) = self.added {
             for &(j, d) in flat.list(w) {
                 if !is_set(self.removed, j) {
-                    let a = self.agreement(j, w, signature);
+                    let a = self.agreement(None, j, w, signature);
                     added += self.cast(j, factor * d * a);
                 }
             }
@@ -488,6 +504,83 @@ impl VoteStats for Voter<'_> {
 mod tests {
     use super::*;
     use crate::index::{ImageWords, MapBuilder};
+
+    /// A map whose images store words and signatures: image j holds words
+    /// `j % 7 ..` with signatures drawn from `seed`.
+    fn signed_map(seed: u64) -> crate::index::MapIndex {
+        use crate::geometry::Keypoint;
+        let mut b = MapBuilder::new(12);
+        let mut state = seed;
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state
+        };
+        for j in 0..9u32 {
+            let words: Vec<u32> = (0..15).map(|i| (j % 7 + i * (i % 3)) % 12).collect();
+            let signatures: Vec<u64> = words.iter().map(|_| next()).collect();
+            let kps = vec![Keypoint::default(); words.len()];
+            b.add(ImageWords::with_geometry(format!("{j}"), &words, &signatures, &kps));
+        }
+        b.build("t", "0", None)
+    }
+
+    #[test]
+    fn weighed_votes_read_the_indexed_runs_as_a_search_would_find_them() {
+        let map = signed_map(3);
+        let view = map.view();
+        assert_eq!(view.feature_runs.len(), view.postings.len());
+        let unindexed = MapView {
+            feature_runs: &[],
+            ..view
+        };
+        let weights = HammingWeights {
+            max_distance: 40,
+            sigma: 20.0,
+        };
+        let mut indexed = Voter::new(&view).with_hamming(&map, weights);
+        let mut searched = Voter::new(&unindexed).with_hamming(&map, weights);
+        let mut plain = Voter::new(&view);
+        for (i, w) in [0u32, 3, 5, 5, 11, 2, 7, 1, 9].into_iter().enumerate() {
+            let signature = 0x9E37_79B9_7F4A_7C15u64.rotate_left(i as u32 * 7);
+            indexed.vote(w, signature);
+            searched.vote(w, signature);
+            plain.vote(w, signature);
+        }
+        assert_eq!(indexed.histogram(), searched.histogram());
+        // the weights are at most 1 and differ somewhere from plain tf-idf
+        let (h, p) = (indexed.histogram(), plain.histogram());
+        assert!(h.iter().zip(p).all(|(a, b)| *a <= *b + 1e-6));
+        assert!(h.iter().zip(p).any(|(a, b)| *a < *b - 1e-6));
+    }
+
+    #[test]
+    fn a_vote_weighs_the_mean_gaussian_of_the_distances() {
+        use crate::geometry::Keypoint;
+        let mut b = MapBuilder::new(2);
+        let kps = [Keypoint::default(); 3];
+        // image 0: word 0 twice (signatures 0 and 0b1111), word 1 once
+        b.add(ImageWords::with_geometry("a", &[0, 0, 1], &[0, 0b1111, 0], &kps));
+        b.add(ImageWords::with_geometry("b", &[1], &[0], &kps[..1]));
+        let map = b.build("t", "0", None);
+        let view = map.view();
+        let weights = HammingWeights {
+            max_distance: 3,
+            sigma: 2.0,
+        };
+        let mut plain = Voter::new(&view);
+        plain.vote(0, 0b1);
+        let mut weighed = Voter::new(&view).with_hamming(&map, weights);
+        weighed.vote(0, 0b1);
+        // distances 1 and 3: (g(1) + g(3)) / 2 of the plain vote
+        let g = |d: f32| (-(d / 2.0f32).powi(2)).exp();
+        let want = plain.histogram()[0] * (g(1.0) + g(3.0)) / 2.0;
+        assert!((weighed.histogram()[0] - want).abs() < 1e-6);
+        // beyond the largest distance a feature adds nothing
+        let mut far = Voter::new(&view).with_hamming(&map, weights);
+        far.vote(0, u64::MAX);
+        assert_eq!(far.histogram()[0], 0.0);
+        assert!(far.touched().is_empty());
+    }
 
     #[test]
     fn incremental_stats_match_a_full_scan() {

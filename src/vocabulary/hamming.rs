@@ -116,8 +116,10 @@ impl HammingEmbedding {
             return;
         }
         let projected = descriptors.dot(&self.projection.t());
+        let thresholds = self.thresholds();
         for ((row, &w), o) in projected.outer_iter().zip(words).zip(out.iter_mut()) {
-            *o = match self.thresholds.outer_iter().nth(w as usize) {
+            let at = w as usize * BITS;
+            *o = match thresholds.get(at..at + BITS) {
                 Some(t) => row
                     .iter()
                     .zip(t)
