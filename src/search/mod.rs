@@ -96,7 +96,7 @@ impl SearchOptions {
         Self {
             rule: RuleSpec::new(Self::RECOMMENDED_RULE, Some(Self::RECOMMENDED_PARAMETER))
                 .expect("a valid built-in rule"),
-            min_features: 100,
+            min_features: 20,
             ..Self::default()
         }
     }
