@@ -194,7 +194,7 @@ fn cli_reports_bad_input_clearly() {
         &p("m.bowmap"),
         &query,
         "--rule",
-        "peak-mean",
+        "relative",
     ]);
     assert!(!ok && err.contains("needs a threshold"), "{err}");
 
