@@ -65,7 +65,12 @@ fn main() {
     let mut b = MapBuilder::new(WORDS);
     for j in 0..images {
         let words = zipf_query(WORDS, FEATURES, j as u64);
-        b.add(ImageWords::with_geometry(format!("file/{j}"), &words, &[], &kps));
+        b.add(ImageWords::with_geometry(
+            format!("file/{j}"),
+            &words,
+            &[],
+            &kps,
+        ));
     }
     b.build("zipf", "synthetic", None).save(&path).unwrap();
     println!("map: {images} images, {WORDS} words, {FEATURES} features per image; {added} adds");
@@ -183,7 +188,11 @@ fn main() {
                 for which in [round % 2, 1 - round % 2] {
                     let started = Instant::now();
                     if which == 0 {
-                        black_box(search_words(&*with_changes, KnownFeatures::words(q), &options));
+                        black_box(search_words(
+                            &*with_changes,
+                            KnownFeatures::words(q),
+                            &options,
+                        ));
                         live_t.push(started.elapsed());
                     } else {
                         black_box(search_words(&compacted, KnownFeatures::words(q), &options));

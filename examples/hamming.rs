@@ -23,7 +23,10 @@ const RUNS: u64 = 3;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let root = PathBuf::from(args.get(1).map_or("../shared/datasets/gardens-point", |s| s));
+    let root = PathBuf::from(
+        args.get(1)
+            .map_or("../shared/datasets/gardens-point", |s| s),
+    );
     let words: usize = args.get(2).map_or(Ok(5000), |s| s.parse())?;
     let seed: u64 = args.get(3).map_or(Ok(1), |s| s.parse())?;
     let dataset = Dataset::open(&root)?;
@@ -47,7 +50,12 @@ fn main() -> anyhow::Result<()> {
             })
         })
         .collect();
-    let weights = |max_distance, sigma| Some(HammingWeights { max_distance, sigma });
+    let weights = |max_distance, sigma| {
+        Some(HammingWeights {
+            max_distance,
+            sigma,
+        })
+    };
     let settings: [(&str, Option<HammingWeights>); 6] = [
         ("plain tf-idf", None),
         ("d ≤ 20", weights(20, f32::INFINITY)),

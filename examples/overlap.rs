@@ -128,7 +128,8 @@ fn main() -> anyhow::Result<()> {
                         return (j, [0.0; 3]);
                     };
                     let mk = map.keypoints(j as usize);
-                    let by_words = tentative(&qf, packed, params.max_word_pairs, params.max_hamming);
+                    let by_words =
+                        tentative(&qf, packed, params.max_word_pairs, params.max_hamming);
                     let word_h = count_inliers(&by_words, &fit, 0).inliers;
                     let m = ratio_matches(qd, md);
                     let c = Correspondences {

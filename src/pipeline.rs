@@ -6,8 +6,8 @@ use crate::dataset::ImageRef;
 use crate::features::fit::OpenCvFit;
 use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
 use crate::geometry::Keypoint;
-use crate::geometry::packed::PackedFeature;
 use crate::geometry::matches::QueryFeature;
+use crate::geometry::packed::PackedFeature;
 use crate::geometry::verify::{LeaderVerifier, VerifyParams, rerank, with_keypoints};
 use crate::index::{ImageWords, MapBuilder, MapIndex, MapRead, Places};
 use crate::live::{LiveMap, Opened};
@@ -589,13 +589,12 @@ impl Localizer {
             extract += took;
             tiles_used += 1;
             keypoints.extend_from_slice(&tile.keypoints);
-            let quantize =
-                search::descriptor_quantizer(
-                    &*quantizer,
-                    self.vocab.hamming(),
-                    tile.descriptors.view(),
-                    options.block,
-                );
+            let quantize = search::descriptor_quantizer(
+                &*quantizer,
+                self.vocab.hamming(),
+                tile.descriptors.view(),
+                options.block,
+            );
             let mut check = LeaderVerifier {
                 map,
                 fit: &self.fit,

@@ -65,7 +65,8 @@ fn check(p: &Prepared) {
             used += lossless.features_used;
             total += lossless.features_total;
             let full1 = search_words(&p.map, words.known(), &options("none", None, seed, 1));
-            let lossless1 = search_words(&p.map, words.known(), &options("lossless", None, seed, 1));
+            let lossless1 =
+                search_words(&p.map, words.known(), &options("lossless", None, seed, 1));
             assert_eq!(
                 ids(&lossless1),
                 ids(&full1),
@@ -75,7 +76,11 @@ fn check(p: &Prepared) {
             used1 += lossless1.features_used;
             total1 += lossless1.features_total;
 
-            let conf = search_words(&p.map, words.known(), &options("confident", Some(DELTA), seed, 1));
+            let conf = search_words(
+                &p.map,
+                words.known(),
+                &options("confident", Some(DELTA), seed, 1),
+            );
             if full.candidates.is_empty() {
                 continue;
             }

@@ -7,7 +7,7 @@ use super::tiles::Query;
 use crate::calibrate::median_features;
 use crate::index::MapIndex;
 use crate::search::stop::RULES;
-use crate::search::{Ranked, RuleSpec, SearchOptions, StopKind, KnownFeatures, search_words};
+use crate::search::{KnownFeatures, Ranked, RuleSpec, SearchOptions, StopKind, search_words};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::{Serialize, Serializer};

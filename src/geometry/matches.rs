@@ -201,8 +201,16 @@ mod tests {
     fn pairs_with_distant_signatures_are_dropped_before_the_cap() {
         let k = kp(1.0, 1.0);
         let query = QueryFeatures::new(&[
-            QueryFeature { word: 9, signature: 0, keypoint: k },
-            QueryFeature { word: 9, signature: u64::MAX, keypoint: kp(2.0, 2.0) },
+            QueryFeature {
+                word: 9,
+                signature: 0,
+                keypoint: k,
+            },
+            QueryFeature {
+                word: 9,
+                signature: u64::MAX,
+                keypoint: kp(2.0, 2.0),
+            },
         ]);
         let m = pack_image(&[9, 9], &[0b111, u64::MAX], &[kp(5.0, 5.0), kp(6.0, 6.0)]);
         // all 4 pairs without a distance limit: over a cap of 3

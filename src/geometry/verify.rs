@@ -314,7 +314,12 @@ pub fn verify_features(
     fit: &dyn ModelFit,
     params: &VerifyParams,
 ) -> (Verification, Correspondences) {
-    let c = tentative(query, map_features, params.max_word_pairs, params.max_hamming);
+    let c = tentative(
+        query,
+        map_features,
+        params.max_word_pairs,
+        params.max_hamming,
+    );
     fit_inliers(&c, fit, params.min_inliers)
 }
 
@@ -420,8 +425,9 @@ pub fn rerank(
         .collect();
     // stable: equal keys keep vote order
     match params.order {
-        Order::Inliers => out[..k]
-            .sort_by_key(|r| std::cmp::Reverse(r.verification.map_or(0, |v| v.inliers))),
+        Order::Inliers => {
+            out[..k].sort_by_key(|r| std::cmp::Reverse(r.verification.map_or(0, |v| v.inliers)))
+        }
         Order::Verified => out[..k].sort_by_key(|r| !r.verification.is_some_and(|v| v.verified)),
     }
     out

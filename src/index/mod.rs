@@ -306,12 +306,19 @@ fn feature_runs(view: &MapView<'_>) -> Vec<[u32; 2]> {
         return Vec::new();
     }
     let mut runs = vec![[0u32; 2]; images.len()];
-    let mut cursor: Vec<u64> = offsets.iter().take(offsets.len().saturating_sub(1)).copied().collect();
+    let mut cursor: Vec<u64> = offsets
+        .iter()
+        .take(offsets.len().saturating_sub(1))
+        .copied()
+        .collect();
     for (j, bounds) in view.geometry_offsets.windows(2).enumerate() {
         let (mut at, end) = (bounds[0] as usize, bounds[1] as usize);
         while at < end {
             let word = view.geometry[at].word;
-            let len = view.geometry[at..end].iter().take_while(|f| f.word == word).count();
+            let len = view.geometry[at..end]
+                .iter()
+                .take_while(|f| f.word == word)
+                .count();
             let list_end = offsets.get(word as usize + 1).copied().unwrap_or(0);
             if let Some(c) = cursor.get_mut(word as usize) {
                 let e = *c as usize;

@@ -34,13 +34,13 @@ pub use trace::{Trace, TracePoint};
 pub use vote::{Needs, Tally, VoteStats, Voter};
 
 use crate::index::MapRead;
-pub use vote::HammingWeights;
-use crate::vocabulary::HammingEmbedding;
 use crate::quantize::Quantizer;
+use crate::vocabulary::HammingEmbedding;
 use ndarray::{Array2, ArrayView2};
 use serde::Serialize;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+pub use vote::HammingWeights;
 
 /// How to run one search.
 #[derive(Debug, Clone)]
@@ -261,7 +261,11 @@ impl<'m> Search<'m> {
     /// `words[..indices.len()]` and `signatures[..indices.len()]` with the
     /// words and Hamming signatures of the batch's features at `indices`
     /// (numbered in the batch from 0). Returns whether the search has stopped.
-    pub fn feed(&mut self, count: usize, quantize: impl FnMut(&[u32], &mut [u32], &mut [u64])) -> bool {
+    pub fn feed(
+        &mut self,
+        count: usize,
+        quantize: impl FnMut(&[u32], &mut [u32], &mut [u64]),
+    ) -> bool {
         self.feed_checked(count, quantize, None)
     }
 

@@ -92,7 +92,11 @@ fn full_bow_ranking_equals_brute_force_tfidf_cosine() {
                 }
             })
             .collect();
-        let got = search_words(&map, KnownFeatures::words(&query), &opts("none", None, q as u64));
+        let got = search_words(
+            &map,
+            KnownFeatures::words(&query),
+            &opts("none", None, q as u64),
+        );
         assert_eq!(got.features_used, query.len());
         assert_eq!(got.stop.kind, StopKind::Exhausted);
         let want = brute_force(&lists, &query);
@@ -117,7 +121,13 @@ fn full_bow_ranking_equals_brute_force_tfidf_cosine() {
 fn same_seed_same_outcome_different_seeds_differ() {
     let (map, lists) = random_map(40, 3);
     let query = &lists[5];
-    let run = |seed| search_words(&map, KnownFeatures::words(query), &opts("stable-peak", Some(8.0), seed));
+    let run = |seed| {
+        search_words(
+            &map,
+            KnownFeatures::words(query),
+            &opts("stable-peak", Some(8.0), seed),
+        )
+    };
     let a = run(7);
     let b = run(7);
     assert_eq!(a.candidates, b.candidates);
@@ -130,7 +140,11 @@ fn same_seed_same_outcome_different_seeds_differ() {
 fn stop_point_does_not_depend_on_block_size() {
     let (map, lists) = random_map(40, 4);
     let query = &lists[9];
-    let reference = search_words(&map, KnownFeatures::words(query), &opts("fixed", Some(0.37), 5));
+    let reference = search_words(
+        &map,
+        KnownFeatures::words(query),
+        &opts("fixed", Some(0.37), 5),
+    );
     assert_eq!(
         reference.features_used,
         (0.37 * query.len() as f64).ceil() as usize
@@ -210,7 +224,11 @@ fn passed_deadline_and_empty_query_are_defined() {
     assert_eq!(got.features_used, 0);
     assert!(got.candidates.is_empty());
 
-    let got = search_words(&map, KnownFeatures::words(&[]), &opts("peak-mean", Some(0.1), 1));
+    let got = search_words(
+        &map,
+        KnownFeatures::words(&[]),
+        &opts("peak-mean", Some(0.1), 1),
+    );
     assert_eq!(got.stop.kind, StopKind::Exhausted);
     assert_eq!(got.features_total, 0);
     assert_eq!(got.fraction_used(), 1.0);
@@ -221,13 +239,20 @@ fn passed_deadline_and_empty_query_are_defined() {
 fn min_features_delays_the_rule() {
     let (map, lists) = random_map(20, 12);
     let query = &lists[3];
-    let eager = search_words(&map, KnownFeatures::words(query), &opts("stable-peak", Some(0.0), 1));
+    let eager = search_words(
+        &map,
+        KnownFeatures::words(query),
+        &opts("stable-peak", Some(0.0), 1),
+    );
     assert_eq!(eager.features_used, 1);
     let o = SearchOptions {
         min_features: 15,
         ..opts("stable-peak", Some(0.0), 1)
     };
-    assert_eq!(search_words(&map, KnownFeatures::words(query), &o).features_used, 15);
+    assert_eq!(
+        search_words(&map, KnownFeatures::words(query), &o).features_used,
+        15
+    );
 }
 
 /// A traced search: the same answer as untraced, a bounded race whose last

@@ -303,12 +303,20 @@ impl<'a> Voter<'a> {
     fn run(&self, entry: Option<usize>, j: u32, w: u32) -> &'a [PackedFeature] {
         if let Some(&[start, len]) = entry.and_then(|e| self.feature_runs.get(e)) {
             let start = start as usize;
-            return self.geometry.get(start..start + len as usize).unwrap_or(&[]);
+            return self
+                .geometry
+                .get(start..start + len as usize)
+                .unwrap_or(&[]);
         }
         let j = j as usize;
-        let features = match (self.geometry_offsets.get(j), self.geometry_offsets.get(j + 1)) {
+        let features = match (
+            self.geometry_offsets.get(j),
+            self.geometry_offsets.get(j + 1),
+        ) {
             (Some(&a), Some(&b)) => self.geometry.get(a as usize..b as usize).unwrap_or(&[]),
-            _ => self.added_geometry.map_or(&[][..], |m| m.geometry(j as u32)),
+            _ => self
+                .added_geometry
+                .map_or(&[][..], |m| m.geometry(j as u32)),
         };
         word_run(features, w)
     }
@@ -512,14 +520,21 @@ mod tests {
         let mut b = MapBuilder::new(12);
         let mut state = seed;
         let mut next = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             state
         };
         for j in 0..9u32 {
             let words: Vec<u32> = (0..15).map(|i| (j % 7 + i * (i % 3)) % 12).collect();
             let signatures: Vec<u64> = words.iter().map(|_| next()).collect();
             let kps = vec![Keypoint::default(); words.len()];
-            b.add(ImageWords::with_geometry(format!("{j}"), &words, &signatures, &kps));
+            b.add(ImageWords::with_geometry(
+                format!("{j}"),
+                &words,
+                &signatures,
+                &kps,
+            ));
         }
         b.build("t", "0", None)
     }
@@ -559,7 +574,12 @@ mod tests {
         let mut b = MapBuilder::new(2);
         let kps = [Keypoint::default(); 3];
         // image 0: word 0 twice (signatures 0 and 0b1111), word 1 once
-        b.add(ImageWords::with_geometry("a", &[0, 0, 1], &[0, 0b1111, 0], &kps));
+        b.add(ImageWords::with_geometry(
+            "a",
+            &[0, 0, 1],
+            &[0, 0b1111, 0],
+            &kps,
+        ));
         b.add(ImageWords::with_geometry("b", &[1], &[0], &kps[..1]));
         let map = b.build("t", "0", None);
         let view = map.view();
