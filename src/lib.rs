@@ -11,9 +11,11 @@
 //!   search over a map split into shards in [`search::shard`].
 //! - [`quantize`] — descriptor → nearest visual word, batched through a
 //!   matrix multiply.
-//! - [`vocabulary`] — the visual words (k-means centroids) and their training.
+//! - [`vocabulary`] — the visual words (k-means centroids) and their training,
+//!   and the Hamming embedding that signs each feature within its word.
 //! - [`geometry`] — keypoints as plain numbers (position, size, angle).
-//! - [`index`] — the map: a tf-idf inverted index over the map's images.
+//! - [`index`] — the map: a tf-idf inverted index over the map's images, and
+//!   each map feature's word, keypoint and signature.
 //! - [`live`] — live maps: images added and removed while serving, a
 //!   durable change log beside the map file, compaction into a new file.
 //! - [`store`] — the memory-mapped, checksummed file format both are kept in.
