@@ -4,8 +4,9 @@
 //! tf_j(w) = count_j(w)/n_j, idf(w) = ln(N_map/df(w)), d_j = tf_j·idf and
 //! d̂_j = d_j/‖d_j‖. The postings of word w list (j, d̂_j(w)) for every image
 //! holding w, in a flat CSR layout. Per-image metadata (name, place label,
-//! pose) rides along, and so does each image's geometry: every feature's word
-//! and keypoint, packed ([`crate::geometry::packed`]), for verification. Built by [`build`], stored and memory-mapped by `file`.
+//! pose) rides along, and so does each image's geometry: every feature's word,
+//! keypoint and Hamming signature, packed ([`crate::geometry::packed`]), for
+//! weighing votes and for verification. Built by [`build`], stored and memory-mapped by `file`.
 
 pub mod build;
 mod file;
