@@ -23,7 +23,7 @@ use bowloc::geometry::packed::pack_image;
 use bowloc::index::synthetic::zipf_query;
 use bowloc::index::{ImageWords, MapBuilder, MapIndex};
 use bowloc::live::{Change, LiveMap, NewImage};
-use bowloc::search::{RuleSpec, SearchOptions, search_words};
+use bowloc::search::{KnownFeatures, RuleSpec, SearchOptions, search_words};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 

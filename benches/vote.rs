@@ -6,7 +6,7 @@
 
 use bowloc::index::MapIndex;
 use bowloc::index::synthetic::{zipf_map, zipf_query};
-use bowloc::search::{RuleSpec, SearchOptions, search_words};
+use bowloc::search::{KnownFeatures, RuleSpec, SearchOptions, search_words};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 

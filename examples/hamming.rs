@@ -12,8 +12,8 @@
 
 use bowloc::dataset::Dataset;
 use bowloc::eval::cache;
-use bowloc::eval::timing::quantize_timed;
 use bowloc::features::{ExtractConfig, TileGrid};
+use bowloc::pipeline::code;
 use bowloc::search::{HammingWeights, KnownFeatures, RuleSpec, SearchOptions, search_words};
 use bowloc::vocabulary::kmeans::KmeansConfig;
 use rayon::prelude::*;
@@ -45,8 +45,8 @@ fn main() -> anyhow::Result<()> {
         .into_par_iter()
         .map(|q| {
             queries.image(q).map(|d| {
-                let w = quantize_timed(&vocab.exact_quantizer(), vocab.hamming(), d, 32);
-                (w.words, w.signatures)
+                let c = code(&vocab, d);
+                (c.words, c.signatures)
             })
         })
         .collect();

@@ -11,6 +11,7 @@
 
 use crate::quantize::Quantizer;
 use crate::vocabulary::HammingEmbedding;
+use crate::vocabulary::hamming::sign_or_zero;
 use cpu_time::ThreadTime;
 use ndarray::{ArrayView2, Axis};
 use serde::Serialize;
@@ -47,9 +48,7 @@ pub fn quantize_timed(
             .zip(signatures.chunks_mut(block.max(1)))
         {
             quantizer.quantize(rows, out);
-            if let Some(he) = signer {
-                he.sign(rows, out, signed);
-            }
+            sign_or_zero(signer, rows, out, signed);
         }
         fastest = fastest.min(started.elapsed().as_secs_f64() * 1e3);
     }

@@ -36,6 +36,7 @@ pub use vote::{Needs, Tally, VoteStats, Voter};
 use crate::index::MapRead;
 use crate::quantize::Quantizer;
 use crate::vocabulary::HammingEmbedding;
+use crate::vocabulary::hamming::sign_or_zero;
 use ndarray::{Array2, ArrayView2};
 use serde::Serialize;
 use std::sync::Arc;
@@ -450,10 +451,7 @@ pub fn descriptor_quantizer<'q>(
         }
         let rows = buffer.slice(ndarray::s![..indices.len(), ..]);
         quantizer.quantize(rows, words);
-        match signer {
-            Some(he) => he.sign(rows, words, signatures),
-            None => signatures.fill(0),
-        }
+        sign_or_zero(signer, rows, words, signatures);
     }
 }
 

@@ -131,6 +131,20 @@ impl HammingEmbedding {
     }
 }
 
+/// Signatures of `descriptors` quantized to `words` by `embedding`, or all 0
+/// without one (plain tf-idf).
+pub fn sign_or_zero(
+    embedding: Option<&HammingEmbedding>,
+    descriptors: ArrayView2<'_, f32>,
+    words: &[u32],
+    out: &mut [u64],
+) {
+    match embedding {
+        Some(he) => he.sign(descriptors, words, out),
+        None => out.fill(0),
+    }
+}
+
 /// Per-column medians of the rows `rows` of `values`.
 fn medians(values: &Array2<f32>, rows: &[usize]) -> Vec<f32> {
     let mut column = Vec::with_capacity(rows.len());

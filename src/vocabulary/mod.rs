@@ -83,10 +83,7 @@ impl Vocabulary {
     /// Signatures of `descriptors` quantized to `words` (all 0 without an
     /// embedding).
     pub fn sign(&self, descriptors: ArrayView2<'_, f32>, words: &[u32], out: &mut [u64]) {
-        match &self.hamming {
-            Some(he) => he.sign(descriptors, words, out),
-            None => out.fill(0),
-        }
+        hamming::sign_or_zero(self.hamming.as_ref(), descriptors, words, out);
     }
 
     pub fn words(&self) -> usize {
