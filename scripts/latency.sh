@@ -1,32 +1,41 @@
 #!/usr/bin/env bash
 # Where a /localize request's time goes, measured from the client: one
-# request at a time against a live `bowloc serve` on loopback (K = 5000 map of
-# gardens-point, 960×540 query images, default rule), comparing curl's total
-# time with the SIFT extraction time the answer reports. Prints medians and
-# the share of the request that is not SIFT extraction. Then, in the same
-# run, each query twice in turn: the full search on the whole image
-# (rule=none&tiles=1x1, what streaming and stopping save against) and the
-# default configuration (streaming extraction, default rule): both medians,
-# their ratio and the median of the per-query ratios.
+# request at a time against a live `bowloc serve` on loopback (default rule
+# and configuration), comparing curl's total time with the SIFT extraction
+# time the answer reports. Prints medians and the share of the request that
+# is not SIFT extraction. Then, in the same run, each query twice in turn:
+# the full search on the whole image (rule=none&tiles=1x1, what streaming and
+# stopping save against) and the default configuration (streaming
+# extraction, default rule): both medians, their ratio and the median of the
+# per-query ratios.
 #
-#   scripts/latency.sh [EVERY] [RULE-QUERY]
+#   [LATENCY_DATASET=rtabmap-loop] scripts/latency.sh [EVERY] [RULE-QUERY]
 #
-# EVERY: use every EVERY-th query of gardens-point (default 10: 20 images,
-# each sent 3 times). RULE-QUERY: extra query string, e.g. "rule=none".
+# LATENCY_DATASET: gardens-point (default; K = 5000 map, 960×540 queries) or
+# rtabmap-loop (K = 1000 map, 512×384 queries). EVERY: use every EVERY-th
+# query (default 10 for gardens-point: 20 images; 1 for rtabmap-loop: 44),
+# each sent 3 times. RULE-QUERY: extra query string, e.g. "rule=none".
+# The server learns the coarse pass (`tiles = "…,auto"`) from the first
+# requests, as it does in service: every request counts.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 . scripts/lib/server.sh
-every=${1:-10}
+name=${LATENCY_DATASET:-gardens-point}
+case $name in
+  gardens-point) gardens_map 5000; dir=data/gardens-5000; default_every=10 ;;
+  rtabmap-loop) load_map; dir=data/load; default_every=1 ;;
+  *) echo "LATENCY_DATASET: gardens-point or rtabmap-loop, not $name" >&2; exit 2 ;;
+esac
+every=${1:-$default_every}
 extra=${2:-}
-gardens_map 5000
 tmp=$(mktemp -d)
 trap 'stop_server; rm -rf "$tmp"' EXIT
-server_config 1 4 data/gardens-5000 >"$tmp/config.toml"
+server_config 1 4 "$dir" >"$tmp/config.toml"
 start_server "$tmp/config.toml" "$tmp/server.log"
-src=../shared/datasets/gardens-point
+src=../shared/datasets/$name
 : >"$tmp/rows"
 for pass in 1 2 3; do
-  awk -v e="$every" 'NR % e == 1' $src/queries.txt | while read -r q; do
+  awk -v e="$every" 'NR % e == 1 || e == 1' $src/queries.txt | while read -r q; do
     client=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
       --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass${extra:+&$extra}")
     jq -r --arg c "$client" '[($c | tonumber) * 1000, .timings_ms.decode, .timings_ms.extract,
@@ -37,17 +46,17 @@ done
 median() { sort -g | awk '{v[NR] = $1} END {print v[int((NR + 1) / 2)]}'; }
 col() { cut -f"$1" "$tmp/rows" | median; }
 share=$(awk -F'\t' '{print 100 * ($1 - $3) / $1}' "$tmp/rows" | median)
-echo "requests=$(wc -l <"$tmp/rows") rule=$(jq -r '.rule.name + " " + (.rule.value | tostring)' "$tmp/answer.json")"
+echo "dataset=$name requests=$(wc -l <"$tmp/rows") rule=$(jq -r '.rule.name + " " + (.rule.value | tostring)' "$tmp/answer.json")"
 echo "median_ms request=$(col 1) decode=$(col 2) extract=$(col 3) quantize=$(col 4) vote=$(col 5) server_total=$(col 6) fraction_used=$(col 7)"
 echo "median share of a request that is not SIFT extraction: ${share}%"
 : >"$tmp/pairs"
 for pass in 1 2 3; do
-  awk -v e="$every" 'NR % e == 1' $src/queries.txt | while read -r q; do
+  awk -v e="$every" 'NR % e == 1 || e == 1' $src/queries.txt | while read -r q; do
     full=$(curl -s -o /dev/null -w '%{time_total}' -H 'Content-Type: image/jpeg' \
       --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass&rule=none&tiles=1x1")
     default=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
       --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass${extra:+&$extra}")
-    tiles=$(jq -r '"\(.tiles.extracted)/\(.tiles.total)"' "$tmp/answer.json")
+    tiles=$(jq -r '"\(.tiles.extracted)/\(.tiles.total)\t\(.tiles.grid)"' "$tmp/answer.json")
     printf '%s\t%s\t%s\n' "$full" "$default" "$tiles" >>"$tmp/pairs"
   done
 done
@@ -55,5 +64,6 @@ full_ms=$(cut -f1 "$tmp/pairs" | median | awk '{print $1 * 1000}')
 default_ms=$(cut -f2 "$tmp/pairs" | median | awk '{print $1 * 1000}')
 per_query=$(awk -F'\t' '{print $2 / $1}' "$tmp/pairs" | median)
 tiles=$(awk -F'\t' '{split($3, t, "/"); s += t[1] / t[2]} END {printf "%.3f", s / NR}' "$tmp/pairs")
+coarse=$(awk -F'\t' '$4 ~ /coarse/ {c++} END {printf "%d of %d", c, NR}' "$tmp/pairs")
 echo "full search, whole image: median ${full_ms} ms; default${extra:+ ($extra)}, streaming: median ${default_ms} ms"
-echo "ratio of medians $(awk -v a="$default_ms" -v b="$full_ms" 'BEGIN {printf "%.3f", a / b}'); median per-query ratio ${per_query}; mean share of tiles extracted ${tiles}"
+echo "ratio of medians $(awk -v a="$default_ms" -v b="$full_ms" 'BEGIN {printf "%.3f", a / b}'); median per-query ratio ${per_query}; mean share of tiles extracted ${tiles}; coarse pass first in ${coarse} requests"

@@ -4,7 +4,9 @@
 
 use crate::dataset::ImageRef;
 use crate::features::fit::OpenCvFit;
-use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles};
+use crate::features::{
+    self, CoarseChoice, DecodeLimits, ExtractConfig, FeatureError, Features, TileGrid, Tiles,
+};
 use crate::geometry::Keypoint;
 use crate::geometry::matches::QueryFeature;
 use crate::geometry::packed::PackedFeature;
@@ -370,6 +372,9 @@ pub struct Localizer {
     /// How queries are cut into tiles for streaming extraction
     /// ([`TileGrid::WHOLE`]: the whole image at once).
     pub tiles: TileGrid,
+    /// Whether a query's extraction starts with the coarse pass, learned
+    /// from what requests cost ([`CoarseChoice`]); `None`: as `tiles` says.
+    pub coarse_choice: Option<CoarseChoice>,
     /// Geometric verification ([`Localizer::set_verify`]); off unless a front
     /// end turns it on.
     verify: VerifyParams,
@@ -409,6 +414,7 @@ impl Localizer {
             limits: DecodeLimits::default(),
             quantizer: QuantizerKind::Exact,
             tiles: TileGrid::WHOLE,
+            coarse_choice: None,
             fit: OpenCvFit::new(no_verify.fit()),
             verify: no_verify,
         }
@@ -490,18 +496,41 @@ impl Localizer {
         options: &SearchOptions,
     ) -> Result<Localization, FeatureError> {
         let grid = self.grid_for(&options.rule, None);
-        self.localize_tiled(bytes, options, grid, self.verify.enabled)
+        let answer = self.localize_tiled(bytes, options, grid, self.verify.enabled)?;
+        self.learn(&options.rule, None, &answer);
+        Ok(answer)
     }
 
     /// The tile grid a query is extracted in: the one `asked` for, else the
     /// configured grid when the rule may stop early, else the whole image (a
     /// search that reads every feature gains nothing from tiles and would pay
-    /// their overlap).
+    /// their overlap). With a learned coarse pass ([`CoarseChoice`]) the
+    /// configured grid starts with it or not as the choice says; pass the
+    /// answer to [`Localizer::learn`].
     pub fn grid_for(&self, rule: &search::RuleSpec, asked: Option<TileGrid>) -> TileGrid {
         match asked {
             Some(grid) => grid,
-            None if rule.info().stops_early => self.tiles,
+            None if rule.info().stops_early => match &self.coarse_choice {
+                Some(choice) => TileGrid {
+                    coarse: choice.choose(),
+                    ..self.tiles
+                },
+                None => self.tiles,
+            },
             None => TileGrid::WHOLE,
+        }
+    }
+
+    /// Tell the learned coarse pass what `answer` cost, when its grid was
+    /// the one [`Localizer::grid_for`] chose for `rule` without being
+    /// `asked` for one.
+    pub fn learn(&self, rule: &search::RuleSpec, asked: Option<TileGrid>, answer: &Localization) {
+        if let Some(choice) = &self.coarse_choice
+            && asked.is_none()
+            && rule.info().stops_early
+        {
+            let t = &answer.timings_ms;
+            choice.record(answer.tiles.grid.coarse, t.total - t.decode);
         }
     }
 
@@ -655,7 +684,10 @@ impl Localizer {
         let bytes =
             std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
         let grid = self.grid_for(&options.rule, tiles);
-        self.localize_tiled(&bytes, options, grid, self.verify.enabled)
-            .with_context(|| format!("{}", path.display()))
+        let answer = self
+            .localize_tiled(&bytes, options, grid, self.verify.enabled)
+            .with_context(|| format!("{}", path.display()))?;
+        self.learn(&options.rule, tiles, &answer);
+        Ok(answer)
     }
 }

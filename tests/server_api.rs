@@ -527,3 +527,43 @@ async fn a_single_query_by_the_posterior_rule_weighs_votes_at_the_configured_kap
         "a smaller κ trusts the votes less: {weak} vs {strong}"
     );
 }
+
+#[tokio::test]
+async fn the_default_plan_tries_the_coarse_pass_and_learns_which_costs_less() {
+    // loaded as the service loads it: the default configuration's plan
+    let mut config = Config::default();
+    let (v, m) = files();
+    config.files.vocabulary = v.clone();
+    config.files.map = m.clone();
+    config.bootstrap.enabled = false;
+    config.server.workers = 1;
+    assert!(config.search.tiles.ends_with(",auto"));
+    let localizer = bowloc::server::bootstrap::load(&config, &Default::default()).unwrap();
+    let state = AppState::new(config).unwrap();
+    state.set_localizer(localizer);
+    let trials = 2 * bowloc::features::CoarseChoice::TRIAL;
+    let mut coarse = 0;
+    for seed in 0..trials {
+        let (status, _, body) = send(
+            &state,
+            localize(&format!("seed={seed}"), "application/json"),
+        )
+        .await;
+        assert_eq!(status, StatusCode::OK);
+        let answer: serde_json::Value = serde_json::from_slice(&body).unwrap();
+        let grid = answer["tiles"]["grid"].as_str().unwrap();
+        assert!(grid.starts_with("2x2+24"), "{grid}");
+        coarse += grid.ends_with(",coarse") as u64;
+    }
+    // the trials split evenly between the two plans
+    assert_eq!(coarse, trials / 2);
+    // a grid asked for is used as asked
+    let (status, _, body) = send(
+        &state,
+        localize("seed=1&tiles=3x3%2B16", "application/json"),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK);
+    let answer: serde_json::Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(answer["tiles"]["grid"], "3x3+16");
+}

@@ -2,6 +2,7 @@
 //! keypoints and descriptors out (an `ndarray` matrix). This is the only module that touches
 //! OpenCV; everything downstream works on plain arrays.
 
+mod coarse_choice;
 mod config;
 mod decode;
 mod extract;
@@ -9,11 +10,12 @@ pub mod fit;
 mod thumbnail;
 mod tiles;
 
+pub use coarse_choice::CoarseChoice;
 pub use config::{ExtractConfig, SiftParams};
 pub use decode::{DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe};
 pub use extract::{Descriptors, Features, Frame, Scales, extract, extract_file};
 pub use thumbnail::thumbnail;
-pub use tiles::{TileGrid, Tiles};
+pub use tiles::{TileGrid, TilePlan, Tiles};
 
 /// Why an image yielded no descriptors.
 #[derive(Debug, thiserror::Error)]

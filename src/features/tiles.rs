@@ -135,6 +135,47 @@ impl std::str::FromStr for TileGrid {
     }
 }
 
+/// How the service cuts queries: a grid, and whether its coarse pass is
+/// learned for the map ([`super::CoarseChoice`]) rather than fixed by the
+/// grid. Written as a grid (`2x2+24`, `2x2+24,coarse`) or a grid followed by
+/// `,auto`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TilePlan {
+    pub grid: TileGrid,
+    pub learn_coarse: bool,
+}
+
+impl std::str::FromStr for TilePlan {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.strip_suffix(",auto") {
+            Some(grid) => Ok(Self {
+                grid: grid
+                    .parse()
+                    .map_err(|e: String| format!("{e}, or ending in ,auto"))?,
+                learn_coarse: true,
+            }),
+            None => Ok(Self {
+                grid: s
+                    .parse()
+                    .map_err(|e: String| format!("{e}, or ending in ,auto"))?,
+                learn_coarse: false,
+            }),
+        }
+    }
+}
+
+impl std::fmt::Display for TilePlan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.grid)?;
+        if self.learn_coarse {
+            write!(f, ",auto")?;
+        }
+        Ok(())
+    }
+}
+
 /// One piece of streaming extraction.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Unit {

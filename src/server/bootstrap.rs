@@ -102,7 +102,11 @@ pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
         let groups = localizer.vocab.tree_quantizer().groups();
         tracing::info!(groups, "quantization tree built");
     }
-    localizer.tiles = config.tiles().map_err(anyhow::Error::msg)?;
+    let plan = config.tiles().map_err(anyhow::Error::msg)?;
+    localizer.tiles = plan.grid;
+    localizer.coarse_choice = plan
+        .learn_coarse
+        .then(crate::features::CoarseChoice::default);
     let cap = config.limits.max_features;
     let sift = &mut localizer.extract.sift;
     if cap > 0 && (sift.max_features == 0 || sift.max_features > cap) {

@@ -225,7 +225,8 @@ pub struct SearchDefaults {
     pub tree_probes: usize,
     /// Streaming extraction: `COLSxROWS+MARGIN` tiles extracted one by one
     /// until the rule stops the search; `1x1` extracts the whole image first;
-    /// a `,coarse` suffix extracts the whole image at half size first.
+    /// a `,coarse` suffix extracts the whole image at half size first; an
+    /// `,auto` suffix learns for the map whether to ([`crate::features::CoarseChoice`]).
     pub tiles: String,
     /// Weigh votes by the features' Hamming signatures (false: plain tf-idf).
     pub hamming: bool,
@@ -305,7 +306,11 @@ impl Default for SearchDefaults {
             min_score: o.min_score,
             quantizer: "exact".into(),
             tree_probes: 16,
-            tiles: crate::features::TileGrid::DEFAULT.to_string(),
+            tiles: crate::features::TilePlan {
+                grid: crate::features::TileGrid::DEFAULT,
+                learn_coarse: true,
+            }
+            .to_string(),
             hamming: o.hamming.is_some(),
         }
     }
@@ -605,8 +610,9 @@ impl Config {
         }
     }
 
-    /// The tile grid of streaming extraction.
-    pub fn tiles(&self) -> Result<crate::features::TileGrid, String> {
+    /// The tile grid of streaming extraction, and whether its coarse pass
+    /// is learned (`,auto`).
+    pub fn tiles(&self) -> Result<crate::features::TilePlan, String> {
         self.search.tiles.parse()
     }
 

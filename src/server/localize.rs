@@ -560,7 +560,9 @@ pub async fn localize(
         d.options.min_features = q.min_features;
     }
     let mut options = params.options(&defaults)?;
-    let tiles = localizer.grid_for(&options.rule, params.tiles()?);
+    let asked = params.tiles()?;
+    let tiles = localizer.grid_for(&options.rule, asked);
+    let rule = options.rule.clone();
     let verify = params.verify(state.config.verify.enabled)?;
     let tracing = params.tracing()?;
     options.deadline = Some(deadline);
@@ -623,6 +625,10 @@ pub async fn localize(
         .await?;
     if answer.stop.kind == crate::search::StopKind::Deadline && answer.features.used == 0 {
         return Err(ApiError::deadline_exceeded()); // the deadline passed before any vote
+    }
+    localizer.learn(&rule, asked, &answer);
+    if let Some(choice) = &localizer.coarse_choice {
+        super::metrics::coarse_choice(choice);
     }
     let mut answer = answer;
     if let Some((name, mut filter, prediction)) = held

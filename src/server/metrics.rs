@@ -43,6 +43,7 @@ pub const MAP_WORDS: &str = "bowloc_map_words";
 pub const MAP_POSTINGS: &str = "bowloc_map_postings";
 pub const BUILD_INFO: &str = "bowloc_build_info";
 pub const SEQUENCES: &str = "bowloc_sequences_live";
+pub const PLAN_COST: &str = "bowloc_extraction_plan_mean_seconds";
 pub const SEQUENCE_EVICTIONS: &str = "bowloc_sequence_evictions_total";
 pub const SEQUENCE_RESTARTS: &str = "bowloc_sequence_restarts_total";
 
@@ -168,6 +169,11 @@ fn describe() {
     );
     describe_gauge!(BUILD_INFO, "Always 1; the version is a label.");
     describe_gauge!(SEQUENCES, "Sequences kept now (/localize?sequence=NAME).");
+    describe_gauge!(
+        PLAN_COST,
+        Unit::Seconds,
+        "Mean request time (without decoding) of streaming extraction with and without the coarse pass, as the learned choice (search.tiles ending in ,auto) sees it."
+    );
     describe_counter!(
         SEQUENCE_EVICTIONS,
         "Sequences dropped, by reason: capacity (least recently used beyond sequence.max_sequences) or idle."
@@ -303,6 +309,16 @@ pub fn localized(answer: &Localization) {
         let top = answer.candidates.first().and_then(|c| c.inliers);
         histogram!(VERIFY_INLIERS).record(top.unwrap_or(0) as f64);
         counter!(VERIFIED, "verified" => verified.to_string()).increment(1);
+    }
+}
+
+/// What the learned coarse pass has measured of each plan.
+pub fn coarse_choice(choice: &crate::features::CoarseChoice) {
+    let (tiles, coarse) = choice.arms();
+    for (plan, arm) in [("tiles", tiles), ("coarse", coarse)] {
+        if arm.samples > 0 {
+            gauge!(PLAN_COST, "plan" => plan).set(arm.mean_ms / 1e3);
+        }
     }
 }
 

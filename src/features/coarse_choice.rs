@@ -1,0 +1,151 @@
+//! Learning, for one map, whether streaming extraction should start with the
+//! coarse pass (`TileGrid::coarse`). The coarse pass costs about a quarter of
+//! the whole image's extraction and pays off when the search often stops on
+//! its keypoints (small images, distinctive places); when it seldom does, it
+//! is paid on top of the tiles. Which holds depends on the map and its
+//! queries, so the service measures it: both plans are tried on the first
+//! requests, then the one with the lower mean request time (extraction,
+//! quantization, voting and verification; decoding is the same either way)
+//! is used, and the other is tried again on one request in
+//! [`CoarseChoice::EXPLORE_EVERY`], so a change of queries is noticed.
+//! No OpenCV here: the policy is plain arithmetic over reported times.
+
+use std::sync::Mutex;
+
+/// The running choice between a grid without and with the coarse pass.
+#[derive(Debug, Default)]
+pub struct CoarseChoice {
+    state: Mutex<State>,
+}
+
+#[derive(Debug, Default, Clone, Copy)]
+struct State {
+    /// Requests seen by [`CoarseChoice::choose`].
+    requests: u64,
+    /// Without (0) and with (1) the coarse pass.
+    arms: [Arm; 2],
+}
+
+/// What one plan has cost.
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+pub struct Arm {
+    /// Requests answered with it.
+    pub samples: u64,
+    /// Mean request time (ms): a plain mean over the first
+    /// [`CoarseChoice::MEMORY`] samples, then a moving average that weighs
+    /// the last one by 1/MEMORY.
+    pub mean_ms: f64,
+}
+
+impl CoarseChoice {
+    /// Requests each plan answers before either is preferred.
+    pub const TRIAL: u64 = 8;
+    /// Once a plan is preferred, one request in this many tries the other.
+    pub const EXPLORE_EVERY: u64 = 32;
+    /// Samples the moving average remembers.
+    pub const MEMORY: f64 = 32.0;
+
+    /// Whether the next request should start with the coarse pass.
+    pub fn choose(&self) -> bool {
+        let mut s = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        s.requests += 1;
+        let [plain, coarse] = s.arms;
+        if plain.samples < Self::TRIAL || coarse.samples < Self::TRIAL {
+            // trials: the plan tried less, alternating on a tie
+            return match plain.samples.cmp(&coarse.samples) {
+                std::cmp::Ordering::Less => false,
+                std::cmp::Ordering::Greater => true,
+                std::cmp::Ordering::Equal => s.requests % 2 == 0,
+            };
+        }
+        let best = coarse.mean_ms < plain.mean_ms;
+        if s.requests % Self::EXPLORE_EVERY == 0 {
+            !best
+        } else {
+            best
+        }
+    }
+
+    /// A request answered with (`coarse`) or without the coarse pass took
+    /// `ms` (not counting its decoding). Non-finite or negative times are
+    /// ignored.
+    pub fn record(&self, coarse: bool, ms: f64) {
+        if !ms.is_finite() || ms < 0.0 {
+            return;
+        }
+        let mut s = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        let arm = &mut s.arms[coarse as usize];
+        arm.samples += 1;
+        let weight = (1.0 / arm.samples as f64).max(1.0 / Self::MEMORY);
+        arm.mean_ms += weight * (ms - arm.mean_ms);
+    }
+
+    /// What each plan has cost so far: (without, with) the coarse pass.
+    pub fn arms(&self) -> (Arm, Arm) {
+        let s = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        (s.arms[0], s.arms[1])
+    }
+
+    /// The plan preferred now (`None` while the trials run).
+    pub fn preferred(&self) -> Option<bool> {
+        let (plain, coarse) = self.arms();
+        (plain.samples >= Self::TRIAL && coarse.samples >= Self::TRIAL)
+            .then_some(coarse.mean_ms < plain.mean_ms)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Answer `n` requests whose cost is `plain_ms` without the coarse pass
+    /// and `coarse_ms` with it; returns how many started with it.
+    fn run(choice: &CoarseChoice, n: usize, plain_ms: f64, coarse_ms: f64) -> usize {
+        let mut coarse_used = 0;
+        for _ in 0..n {
+            let coarse = choice.choose();
+            coarse_used += coarse as usize;
+            choice.record(coarse, if coarse { coarse_ms } else { plain_ms });
+        }
+        coarse_used
+    }
+
+    #[test]
+    fn both_plans_are_tried_before_one_is_preferred() {
+        let c = CoarseChoice::default();
+        let used = run(&c, 2 * CoarseChoice::TRIAL as usize, 10.0, 50.0);
+        assert_eq!(used, CoarseChoice::TRIAL as usize);
+        assert_eq!(c.preferred(), Some(false));
+        let (plain, coarse) = c.arms();
+        assert_eq!((plain.mean_ms, coarse.mean_ms), (10.0, 50.0));
+    }
+
+    #[test]
+    fn the_cheaper_plan_wins_and_the_other_is_still_sampled() {
+        let c = CoarseChoice::default();
+        run(&c, 16, 60.0, 20.0);
+        let used = run(&c, 320, 60.0, 20.0);
+        // all but one request in EXPLORE_EVERY start with the coarse pass
+        assert_eq!(used, 320 - 320 / CoarseChoice::EXPLORE_EVERY as usize);
+        assert_eq!(c.preferred(), Some(true));
+    }
+
+    #[test]
+    fn a_change_in_costs_changes_the_choice() {
+        let c = CoarseChoice::default();
+        run(&c, 200, 60.0, 20.0);
+        assert_eq!(c.preferred(), Some(true));
+        // the queries change: the coarse pass no longer pays
+        run(&c, 2000, 60.0, 90.0);
+        assert_eq!(c.preferred(), Some(false));
+    }
+
+    #[test]
+    fn times_that_are_not_times_are_ignored() {
+        let c = CoarseChoice::default();
+        c.record(true, f64::NAN);
+        c.record(false, -1.0);
+        c.record(false, f64::INFINITY);
+        assert_eq!(c.arms(), (Arm::default(), Arm::default()));
+    }
+}
