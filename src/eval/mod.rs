@@ -610,6 +610,35 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         .zip(&per_seed)
         .map(|(o, q)| summary::request_ms(&o[0], &q.costs))
         .collect();
+    // The full search on the queries extracted whole: what tiling changes,
+    // and what the service's `rule=none` costs.
+    let whole_runs: Option<Vec<Vec<Vec<Outcome>>>> = whole.as_ref().map(|whole| {
+        let bar = progress_bar(
+            (counts.len() * seeds.len()) as u64,
+            "sweeping whole queries",
+        );
+        let runs = maps
+            .iter()
+            .zip(whole)
+            .map(|(map, q)| {
+                let mut o =
+                    sweep::run_all(map, &q.queries, &settings[..1], config.runs, top_n, &bar);
+                o.swap_remove(0)
+            })
+            .collect();
+        bar.finish_and_clear();
+        runs
+    });
+    let whole_ms: Option<Vec<Vec<Vec<f64>>>> =
+        whole_runs
+            .as_ref()
+            .zip(whole.as_ref())
+            .map(|(runs, whole)| {
+                runs.iter()
+                    .zip(whole)
+                    .map(|(o, q)| summary::request_ms(o, &q.costs))
+                    .collect()
+            });
     let summaries: Vec<SettingSummary> = settings
         .par_iter()
         .enumerate()
@@ -618,39 +647,28 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
                 .iter()
                 .zip(&per_seed)
                 .zip(&full_ms)
-                .map(|((o, q), full)| SeedOutcomes {
+                .enumerate()
+                .map(|(k, ((o, q), full))| SeedOutcomes {
                     runs: &o[i],
                     costs: &q.costs,
                     full_ms: full,
+                    whole_ms: whole_ms.as_ref().map(|w| &w[k][..]),
                 })
                 .collect();
             summary::summarize(s, &by_seed, &dataset.truth, &tiles_total)
         })
         .collect();
-    // The full search on the queries extracted whole: what tiling changes.
-    let whole_image = whole.map(|whole| {
-        let bar = progress_bar(
-            (counts.len() * seeds.len()) as u64,
-            "sweeping whole queries",
-        );
-        let runs: Vec<Vec<Vec<Outcome>>> = maps
-            .iter()
-            .zip(&whole)
-            .map(|(map, q)| {
-                let mut o =
-                    sweep::run_all(map, &q.queries, &settings[..1], config.runs, top_n, &bar);
-                o.swap_remove(0)
-            })
-            .collect();
-        bar.finish_and_clear();
+    let whole_image = whole_runs.zip(whole.as_ref()).map(|(runs, whole)| {
         let by_seed: Vec<SeedOutcomes<'_>> = runs
             .iter()
-            .zip(&whole)
+            .zip(whole)
             .zip(&full_ms)
-            .map(|((o, q), full)| SeedOutcomes {
+            .enumerate()
+            .map(|(k, ((o, q), full))| SeedOutcomes {
                 runs: o,
                 costs: &q.costs,
                 full_ms: full,
+                whole_ms: whole_ms.as_ref().map(|w| &w[k][..]),
             })
             .collect();
         let ones = vec![1; counts.len()];

@@ -144,6 +144,10 @@ pub struct SettingSummary {
     /// Request time as a fraction of the full search's on the same query
     /// (and vocabulary).
     pub time_share: TimeShare,
+    /// Request time as a fraction of the full search's on the same query
+    /// extracted whole, as the service answers `rule=none` (when the
+    /// evaluation ran it: queries streamed in tiles).
+    pub time_share_whole: Option<TimeShare>,
     /// Mean fraction of the image's tiles extracted.
     pub tiles: f64,
     /// The metrics of every run: `runs[seed][run]`.
@@ -191,6 +195,7 @@ impl SettingSummary {
             fraction: stat(fraction),
             time_ms: StageTimes::default(),
             time_share: TimeShare::default(),
+            time_share_whole: None,
             tiles: 1.0,
             runs: vec![],
         }
@@ -232,6 +237,8 @@ pub struct SeedOutcomes<'a> {
     /// The full search's request time on this vocabulary, `[run][query]`
     /// (see [`request_ms`]).
     pub full_ms: &'a [Vec<f64>],
+    /// The same for the full search on the queries extracted whole, if run.
+    pub whole_ms: Option<&'a [Vec<f64>]>,
 }
 
 /// Summarise a setting from its outcomes on each vocabulary seed.
@@ -264,14 +271,16 @@ pub fn summarize(
         .map(|(o, &n)| o.tiles as f64 / n.max(1) as f64)
         .collect();
     // request times of every seed's runs, against that seed's full search
-    let (ms, full): (Vec<Vec<f64>>, Vec<Vec<f64>>) = seeds
+    let ms: Vec<Vec<f64>> = seeds
         .iter()
-        .flat_map(|s| {
-            request_ms(s.runs, s.costs)
-                .into_iter()
-                .zip(s.full_ms.iter().cloned())
-        })
-        .unzip();
+        .flat_map(|s| request_ms(s.runs, s.costs))
+        .collect();
+    let full: Vec<Vec<f64>> = seeds.iter().flat_map(|s| s.full_ms.to_vec()).collect();
+    let whole: Option<Vec<Vec<f64>>> = seeds
+        .iter()
+        .map(|s| s.whole_ms.map(<[Vec<f64>]>::to_vec))
+        .collect::<Option<Vec<_>>>()
+        .map(|w| w.into_iter().flatten().collect());
     SettingSummary {
         setting: setting.clone(),
         label: setting.label(),
@@ -281,6 +290,7 @@ pub fn summarize(
         fraction: over(&|m| m.fraction),
         time_ms: timing::summarize(&samples),
         time_share: TimeShare::of(&ms, &full),
+        time_share_whole: whole.map(|w| TimeShare::of(&ms, &w)),
         tiles: metrics::mean(&tile_shares),
         runs: per_run,
     }
@@ -329,12 +339,28 @@ mod tests {
         }; 2];
         // the full search took 21 ms on every query (10 + 100 × 0.1 + 1)
         let full = vec![vec![21.0; 2]; 2];
+        // extracted whole, it took 32 ms: each share of it is 21/32 of the other
+        let whole = vec![vec![32.0; 2]; 2];
         let one = [SeedOutcomes {
             runs: &runs,
             costs: &costs,
             full_ms: &full,
+            whole_ms: None,
         }];
         let s = summarize(&setting, &one, &truth, &[1, 1]);
+        assert_eq!(s.time_share_whole, None);
+        let against_whole = summarize(
+            &setting,
+            &[SeedOutcomes {
+                whole_ms: Some(&whole),
+                ..one[0]
+            }],
+            &truth,
+            &[1, 1],
+        );
+        let w = against_whole.time_share_whole.unwrap();
+        assert!((w.mean - s.time_share.mean * 21.0 / 32.0).abs() < 1e-12);
+        assert!((w.median - s.time_share.median * 21.0 / 32.0).abs() < 1e-12);
         assert_eq!(s.runs[0][0].recall90, [1.0; 3]);
         assert_eq!(s.runs[0][1].recall90, [0.0; 3]);
         assert_eq!(s.recall90_at(5).mean, 0.5);
@@ -363,6 +389,7 @@ mod tests {
                 runs: &better,
                 costs: &costs,
                 full_ms: &full,
+                whole_ms: None,
             },
         ];
         let s = summarize(&setting, &two, &truth, &[1, 1]);

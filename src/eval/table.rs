@@ -388,6 +388,11 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
     ]
     .map(String::from)
     .to_vec();
+    let whole = picked.iter().any(|x| x.time_share_whole.is_some());
+    let mut header = header;
+    if whole {
+        header.push("× whole-image full search, mean / median".into());
+    }
     let rows: Vec<Vec<String>> = picked
         .iter()
         .map(|x| {
@@ -402,6 +407,12 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
                 ms(x.time_ms.total),
                 format!("{:.3} / {:.3}", x.time_share.mean, x.time_share.median),
             ]
+            .into_iter()
+            .chain(whole.then(|| {
+                x.time_share_whole
+                    .map_or("–".into(), |w| format!("{:.3} / {:.3}", w.mean, w.median))
+            }))
+            .collect()
         })
         .collect();
     let t = &report.stages;
@@ -415,7 +426,8 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
          and rule checks inside the search; verify = the `verified` rule's checks and the \
          re-ranking. `× full search`: the request time against the full search's on the same \
          query (tiled; the `(whole image)` row is the full search on queries extracted \
-         whole). Measured on this machine with all cores busy (queries run in parallel); \
+         whole); `× whole-image full search`: against that whole-image full search, which is \
+         how the service answers `rule=none`. Measured on this machine with all cores busy (queries run in parallel); \
          every setting's times are in `results.csv`.\n\n{}\n",
         t.total_s,
         t.extract_s,
@@ -518,6 +530,10 @@ fn csv_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::Result<()
         header.push(format!("{stage}_ms_median"));
         header.push(format!("{stage}_ms_p95"));
     }
+    for of in ["full", "whole_full"] {
+        header.push(format!("time_share_{of}_mean"));
+        header.push(format!("time_share_{of}_median"));
+    }
     w.write_record(&header)?;
     for s in &report.settings {
         let mut r = vec![
@@ -548,6 +564,10 @@ fn csv_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::Result<()
         for q in [t.extract, t.quantize, t.vote, t.search, t.total] {
             r.push(format!("{:.4}", q.median));
             r.push(format!("{:.4}", q.p95));
+        }
+        for share in [Some(s.time_share), s.time_share_whole] {
+            r.push(share.map_or(String::new(), |x| format!("{:.4}", x.mean)));
+            r.push(share.map_or(String::new(), |x| format!("{:.4}", x.median)));
         }
         w.write_record(&r)?;
     }
