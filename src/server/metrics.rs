@@ -43,7 +43,7 @@ pub const MAP_WORDS: &str = "bowloc_map_words";
 pub const MAP_POSTINGS: &str = "bowloc_map_postings";
 pub const BUILD_INFO: &str = "bowloc_build_info";
 pub const SEQUENCES: &str = "bowloc_sequences_live";
-pub const PLAN_COST: &str = "bowloc_extraction_plan_mean_seconds";
+pub const PLAN_COST: &str = "bowloc_extraction_plan_typical_seconds";
 pub const SEQUENCE_EVICTIONS: &str = "bowloc_sequence_evictions_total";
 pub const SEQUENCE_RESTARTS: &str = "bowloc_sequence_restarts_total";
 
@@ -172,7 +172,7 @@ fn describe() {
     describe_gauge!(
         PLAN_COST,
         Unit::Seconds,
-        "Mean request time (without decoding) of streaming extraction with and without the coarse pass, as the learned choice (search.tiles ending in ,auto) sees it."
+        "Typical request time (geometric mean, without decoding) of streaming extraction with and without the coarse pass, as the learned choice (search.tiles ending in ,auto) sees it."
     );
     describe_counter!(
         SEQUENCE_EVICTIONS,
@@ -317,7 +317,7 @@ pub fn coarse_choice(choice: &crate::features::CoarseChoice) {
     let (tiles, coarse) = choice.arms();
     for (plan, arm) in [("tiles", tiles), ("coarse", coarse)] {
         if arm.samples > 0 {
-            gauge!(PLAN_COST, "plan" => plan).set(arm.mean_ms / 1e3);
+            gauge!(PLAN_COST, "plan" => plan).set(arm.typical_ms() / 1e3);
         }
     }
 }
