@@ -304,7 +304,7 @@ impl<'m> Search<'m> {
             self.timings.quantize += quantized - started;
             let mut checking = Duration::ZERO;
             let batch = self.words[..indices.len()].iter().zip(&self.signatures);
-            for (&i, (&w, &signature)) in indices.iter().zip(batch) {
+            for (k, (&i, (&w, &signature))) in indices.iter().zip(batch).enumerate() {
                 self.voter.vote(w, signature);
                 self.voted.push(Voted {
                     feature: offset + i,
@@ -315,15 +315,18 @@ impl<'m> Search<'m> {
                 let why = if features < self.options.min_features {
                     None
                 } else {
-                    // A geometric check costs far more than a vote, and stopping
-                    // inside a batch saves no extraction: only at a batch's end.
+                    // A geometric check costs far more than a vote: offered
+                    // only at a block's end, saying whether the batch ends.
+                    let block_end = k + 1 == indices.len();
                     let at_end = self.voted.len() == self.fed;
                     let check = leader_check
                         .as_mut()
-                        .filter(|_| at_end)
+                        .filter(|_| block_end)
                         .map(|c| &mut **c as &mut dyn LeaderCheck);
-                    let started = at_end.then(Instant::now);
-                    let why = self.rule.check_with(&self.voter, &self.voted, check);
+                    let started = block_end.then(Instant::now);
+                    let why = self
+                        .rule
+                        .check_with(&self.voter, &self.voted, check, at_end);
                     if let Some(started) = started {
                         checking += started.elapsed();
                     }

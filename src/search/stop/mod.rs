@@ -40,14 +40,17 @@ pub trait StopRule: Send {
 
     /// [`check`](Self::check) with what a geometric rule needs besides the
     /// votes: the features voted so far and a way to check a
-    /// candidate against them. Vote rules ignore both.
+    /// candidate against them, offered at the end of each block of features
+    /// (`batch_end`: the last block of a batch, after which the next tile
+    /// must be extracted). Vote rules ignore them.
     fn check_with(
         &mut self,
         voter: &dyn VoteStats,
         voted: &[Voted],
         leader_check: Option<&mut dyn LeaderCheck>,
+        batch_end: bool,
     ) -> Option<String> {
-        let _ = (voted, leader_check);
+        let _ = (voted, leader_check, batch_end);
         self.check(voter)
     }
 }

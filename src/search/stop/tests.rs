@@ -321,7 +321,7 @@ fn verified_stop(m: f64, stream: &[u32], check: &mut FakeCheck) -> Option<usize>
             word: w,
             signature: 0,
         });
-        if rule.check_with(&voter, &voted, Some(check)).is_some() {
+        if rule.check_with(&voter, &voted, Some(check), true).is_some() {
             return Some(voter.tally().features);
         }
     }
@@ -363,7 +363,10 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     };
     voter.vote(0, 0);
     for _ in 0..3 {
-        assert!(rule.check_with(&voter, &[VOTED_0], Some(&mut c)).is_none());
+        assert!(
+            rule.check_with(&voter, &[VOTED_0], Some(&mut c), true)
+                .is_none()
+        );
     }
     assert_eq!(c.calls, 1);
     // without a check the rule never stops
@@ -373,8 +376,37 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     let mut rule = spec("verified", 8.0).build(&RuleContext::default());
     for _ in 0..100 {
         voter.vote(0, 0);
-        assert!(rule.check_with(&voter, &[VOTED_0], None).is_none());
+        assert!(rule.check_with(&voter, &[VOTED_0], None, true).is_none());
     }
+    // inside a batch, checks follow a geometric schedule: at 1, 2, 3, 5, 8,
+    // 12, … features (each at least 1.5 times the last)
+    let map = one_word_per_image();
+    let view = map.view();
+    let mut voter = Voter::new(&view);
+    let mut rule = spec("verified", 13.0).build(&RuleContext::default());
+    let mut c = FakeCheck {
+        inliers: 12,
+        calls: 0,
+    };
+    let mut voted = Vec::new();
+    let mut checked_at = Vec::new();
+    for i in 0..100u32 {
+        voter.vote(0, 0);
+        voted.push(Voted {
+            feature: i,
+            word: 0,
+            signature: 0,
+        });
+        let before = c.calls;
+        assert!(
+            rule.check_with(&voter, &voted, Some(&mut c), false)
+                .is_none()
+        );
+        if c.calls > before {
+            checked_at.push(i + 1);
+        }
+    }
+    assert_eq!(checked_at, [1, 2, 3, 5, 8, 12, 18, 27, 41, 62, 93]);
     assert!(RuleSpec::new("verified", Some(3.0)).is_err());
     assert!(RuleSpec::new("verified", Some(8.5)).is_err());
 }

@@ -7,11 +7,13 @@
 //! hard ones lose nothing.
 //!
 //! A check costs far more than a vote, so the search offers one only at the
-//! end of a batch (a tile of streaming extraction: stopping inside a tile
-//! saves no extraction), and the rule takes every check offered: a tile's
-//! extraction costs more than a check, so a leader left unchecked at a tile's
-//! end would cost a whole tile more. A leader is not checked twice on the
-//! same votes.
+//! end of a block of features. The rule takes every check offered at the end
+//! of a batch (a tile of streaming extraction): a tile's extraction costs
+//! more than a check, so a leader left unchecked there would cost a whole
+//! tile more. Inside a tile, where stopping saves quantization and votes but
+//! no extraction, it checks on a geometric schedule: once the features voted
+//! have grown by [`GROWTH`] since the last check, so a query is checked
+//! O(log N) times. A leader is not checked twice on the same votes.
 
 use super::{Grid, LeaderCheck, Parameter, Range, RuleInfo, StopRule, VoteStats};
 use crate::search::Voted;
@@ -38,6 +40,10 @@ pub const INFO: RuleInfo = RuleInfo {
     },
 };
 
+/// Inside a batch, the features voted must have grown by this factor since
+/// the last check for another.
+pub const GROWTH: f64 = 1.5;
+
 struct Verified {
     min_inliers: usize,
     /// The leader and the feature count of the last check.
@@ -56,11 +62,18 @@ impl StopRule for Verified {
         voter: &dyn VoteStats,
         voted: &[Voted],
         leader_check: Option<&mut dyn LeaderCheck>,
+        batch_end: bool,
     ) -> Option<String> {
         let t = voter.tally();
         let leader = t.leader?;
         let checker = leader_check?;
         if self.checked == Some((leader, t.features)) {
+            return None;
+        }
+        if !batch_end
+            && let Some((_, at)) = self.checked
+            && (t.features as f64) < at as f64 * GROWTH
+        {
             return None;
         }
         let inliers = checker.inliers(leader, voted);
