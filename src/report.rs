@@ -257,6 +257,13 @@ pub struct Candidate {
     /// With verification: the inlier count (0 for a candidate beyond the
     /// verified top k). Either way comparable across queries.
     pub score: f32,
+    /// Its votes h against the best image outside its place (the images
+    /// within `search.place_window` along the map's order):
+    /// h / (h + h_elsewhere), in [0, 1]; ½ for a tie. It means the same for
+    /// every query: a threshold on the top candidate's picks the answers to
+    /// trust (docs/results.md, "Distinctness").
+    #[schema(minimum = 0, maximum = 1)]
+    pub distinct: f32,
     /// With verification, the vote score the candidate had (the score
     /// without verification).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -403,16 +410,17 @@ impl Candidate {
             .candidates
             .iter()
             .enumerate()
-            .map(|(i, r)| Self::new(i + 1, r.score, map.image(r.id)))
+            .map(|(i, r)| Self::new(i + 1, r.score, r.distinct, map.image(r.id)))
             .collect()
     }
 
-    fn new(rank: usize, score: f32, info: ImageInfo<'_>) -> Self {
+    fn new(rank: usize, score: f32, distinct: f32, info: ImageInfo<'_>) -> Self {
         Self {
             rank,
             id: info.id,
             name: info.name.to_owned(),
             score,
+            distinct,
             votes: None,
             inliers: None,
             verified: None,
@@ -531,13 +539,19 @@ impl Localization {
         min_score: f32,
         elapsed: Duration,
     ) -> Self {
+        let distinct = |id: u32| {
+            self.candidates
+                .iter()
+                .find(|c| c.id == id)
+                .map_or(0.0, |c| c.distinct)
+        };
         self.candidates = reranked
             .iter()
             .filter(|r| r.score() >= min_score)
             .take(top_n)
             .enumerate()
             .map(|(i, r)| {
-                let mut c = Candidate::new(i + 1, r.score(), map.image(r.id));
+                let mut c = Candidate::new(i + 1, r.score(), distinct(r.id), map.image(r.id));
                 c.votes = Some(r.votes);
                 c.inliers = r.verification.map(|v| v.inliers as u32);
                 c.verified = r.verification.map(|v| v.verified);

@@ -102,6 +102,9 @@ pub struct SearchArgs {
     /// Vote plain tf-idf, without weighing votes by Hamming signatures.
     #[arg(long)]
     pub no_hamming: bool,
+    /// Images on each side, along the map's order, that count as one place when a candidate's distinctness is measured.
+    #[arg(long, default_value_t = SearchOptions::recommended().place_window)]
+    pub place_window: u32,
 }
 
 impl SearchArgs {
@@ -146,6 +149,7 @@ impl SearchArgs {
             } else {
                 recommended.hamming
             },
+            place_window: self.place_window,
         })
     }
 }

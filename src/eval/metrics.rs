@@ -211,7 +211,11 @@ mod tests {
 
     fn ranked(list: &[(u32, f32)]) -> Vec<Ranked> {
         list.iter()
-            .map(|&(id, score)| Ranked { id, score })
+            .map(|&(id, score)| Ranked {
+                id,
+                score,
+                distinct: score,
+            })
             .collect()
     }
 

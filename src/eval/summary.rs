@@ -68,6 +68,9 @@ pub struct RunMetrics {
     pub cut90: [Option<f32>; 3],
     pub recall_at_1: f64,
     pub recall_at_5: f64,
+    /// Recall of the top candidate at 90 % precision when its
+    /// distinctness, not its score, is cut ([`crate::search::Ranked::distinct`]).
+    pub recall90_top1_distinct: f64,
     /// Mean over queries of the fraction of features used.
     pub fraction: f64,
 }
@@ -138,6 +141,8 @@ pub struct SettingSummary {
     pub recall90: [Stat; 3],
     pub recall_at_1: Stat,
     pub recall_at_5: Stat,
+    /// Recall top-1 @90 % precision by distinctness.
+    pub recall90_top1_distinct: Stat,
     pub fraction: Stat,
     /// Per-query stage times over all seeds, queries and runs, in milliseconds.
     pub time_ms: StageTimes,
@@ -192,6 +197,7 @@ impl SettingSummary {
             recall90: std::array::from_fn(|_| stat(recall90)),
             recall_at_1: stat(recall_at_1),
             recall_at_5: stat(recall_at_1),
+            recall90_top1_distinct: stat(recall90),
             fraction: stat(fraction),
             time_ms: StageTimes::default(),
             time_share: TimeShare::default(),
@@ -224,6 +230,26 @@ pub fn run_metrics(outcomes: &[Outcome], truth: &[HashSet<u32>]) -> RunMetrics {
         cut90: at.map(|r| r.threshold),
         recall_at_1: metrics::recall_at(&answers, 1),
         recall_at_5: metrics::recall_at(&answers, 5),
+        recall90_top1_distinct: {
+            let by_distinct: Vec<Vec<crate::search::Ranked>> = outcomes
+                .iter()
+                .map(|o| {
+                    o.candidates
+                        .iter()
+                        .map(|c| crate::search::Ranked {
+                            score: c.distinct,
+                            ..*c
+                        })
+                        .collect()
+                })
+                .collect();
+            let answers: Vec<Answer<'_>> = by_distinct
+                .iter()
+                .zip(truth)
+                .map(|(candidates, truth)| Answer { candidates, truth })
+                .collect();
+            metrics::recall_at_precision(&answers, 1, PRECISION).recall
+        },
         fraction: metrics::mean(&fractions),
     }
 }
@@ -287,6 +313,7 @@ pub fn summarize(
         recall90: [0, 1, 2].map(|i| over(&|m| m.recall90[i])),
         recall_at_1: over(&|m| m.recall_at_1),
         recall_at_5: over(&|m| m.recall_at_5),
+        recall90_top1_distinct: over(&|m| m.recall90_top1_distinct),
         fraction: over(&|m| m.fraction),
         time_ms: timing::summarize(&samples),
         time_share: TimeShare::of(&ms, &full),
@@ -310,7 +337,11 @@ mod tests {
         Outcome {
             candidates: list
                 .iter()
-                .map(|&(id, score)| Ranked { id, score })
+                .map(|&(id, score)| Ranked {
+                    id,
+                    score,
+                    distinct: score,
+                })
                 .collect(),
             used,
             total: 100,

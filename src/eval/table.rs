@@ -121,6 +121,9 @@ fn paper_rows(columns: &[&SettingSummary], parameter: &str) -> Vec<Vec<String>> 
     }));
     rows.push(row("recall@1".into(), &|s| pct_seeds(&s.recall_at_1)));
     rows.push(row("recall@5".into(), &|s| pct_seeds(&s.recall_at_5)));
+    rows.push(row("recall top-1 @90%P by distinctness".into(), &|s| {
+        pct_seeds(&s.recall90_top1_distinct)
+    }));
     rows
 }
 
@@ -519,7 +522,7 @@ fn csv_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::Result<()
     let names: Vec<String> = TOP_N
         .iter()
         .map(|n| format!("recall90_top{n}"))
-        .chain(["recall1", "recall5", "fraction"].map(String::from))
+        .chain(["recall1", "recall5", "recall90_top1_distinct", "fraction"].map(String::from))
         .collect();
     for name in &names {
         for part in ["mean", "seed_std", "runs_std", "worst"] {
@@ -551,7 +554,7 @@ fn csv_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::Result<()
         let stats = s
             .recall90
             .iter()
-            .chain([&s.recall_at_1, &s.recall_at_5])
+            .chain([&s.recall_at_1, &s.recall_at_5, &s.recall90_top1_distinct])
             .map(|st| (st, st.lowest()))
             .chain([(&s.fraction, s.fraction.highest())]);
         for (st, worst) in stats {

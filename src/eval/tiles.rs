@@ -178,6 +178,7 @@ impl Query {
                 .map(|r| Ranked {
                     id: r.id,
                     score: r.score(),
+                    distinct: search::rank::distinct_of(&outcome.candidates, r.id),
                 })
                 .collect();
             verify_ms += started.elapsed().as_secs_f64() * 1e3;

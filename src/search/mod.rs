@@ -66,6 +66,9 @@ pub struct SearchOptions {
     pub prior: Option<Arc<Prior>>,
     /// Weigh votes by the features' Hamming signatures (`None`: plain tf-idf).
     pub hamming: Option<HammingWeights>,
+    /// Images on each side, along the map's order, that count as one place
+    /// when a candidate's distinctness is measured ([`Ranked::distinct`]).
+    pub place_window: u32,
 }
 
 impl Default for SearchOptions {
@@ -80,6 +83,7 @@ impl Default for SearchOptions {
             deadline: None,
             prior: None,
             hamming: Some(HammingWeights::DEFAULT),
+            place_window: Self::PLACE_WINDOW,
         }
     }
 }
@@ -89,6 +93,9 @@ impl SearchOptions {
     pub const RECOMMENDED_RULE: &'static str = "peak-mean";
     /// Its parameter.
     pub const RECOMMENDED_PARAMETER: f64 = 1.6;
+    /// The place window distinctness is measured with (docs/results.md,
+    /// "Distinctness").
+    pub const PLACE_WINDOW: u32 = 2;
 
     /// The settings the service, the CLI and the configuration default to:
     /// the rule, parameter and warm-up chosen by evaluation
@@ -405,6 +412,7 @@ impl<'m> Search<'m> {
                 self.options.top_n,
                 self.options.min_score,
                 allowed,
+                self.options.place_window,
             ),
             posterior,
             frame_posterior,

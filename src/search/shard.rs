@@ -193,8 +193,9 @@ impl Merged<'_> {
         self.reports.len()
     }
 
-    /// The top `n` by h (ties by lower id), scores h/t, as [`super::rank::top_n`].
-    fn top_n(&self, n: usize, min_score: f32) -> Vec<Ranked> {
+    /// The top `n` by h (ties by lower id), scores h/t, as [`super::rank::top_n`];
+    /// distinctness against the images the shards reported.
+    fn top_n(&self, n: usize, min_score: f32, window: u32) -> Vec<Ranked> {
         if self.tally.features == 0 {
             return Vec::new();
         }
@@ -205,6 +206,7 @@ impl Merged<'_> {
             .map(|&(h, id)| Ranked {
                 id,
                 score: h * scale,
+                distinct: super::rank::distinctness(id, h, &self.ranked, window),
             })
             .filter(|r| r.score >= min_score)
             .collect()
@@ -396,7 +398,7 @@ pub fn search_tiles(
         stop.unwrap_or_else(|| (StopKind::Exhausted, "all features used".to_owned()));
     ShardedOutcome {
         outcome: SearchOutcome {
-            candidates: merged.top_n(options.top_n, options.min_score),
+            candidates: merged.top_n(options.top_n, options.min_score, options.place_window),
             features_total: fed,
             features_used: used,
             stop: StopInfo {

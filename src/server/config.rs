@@ -230,6 +230,9 @@ pub struct SearchDefaults {
     pub tiles: String,
     /// Weigh votes by the features' Hamming signatures (false: plain tf-idf).
     pub hamming: bool,
+    /// Images on each side, along the map's order, that count as one place
+    /// when a candidate's distinctness is measured (0: each image alone).
+    pub place_window: u32,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -312,6 +315,7 @@ impl Default for SearchDefaults {
             }
             .to_string(),
             hamming: o.hamming.is_some(),
+            place_window: o.place_window,
         }
     }
 }

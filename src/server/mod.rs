@@ -97,6 +97,7 @@ impl AppState {
                 deadline: None,
                 prior: None,
                 hamming: s.hamming.then_some(crate::search::HammingWeights::DEFAULT),
+                place_window: s.place_window,
             },
             max_top_n: config.limits.max_top_n,
         };

@@ -95,6 +95,7 @@ fn candidate(c: &Candidate) -> pb::Candidate {
         id: c.id,
         name: c.name.clone(),
         score: c.score,
+        distinct: c.distinct,
         votes: c.votes,
         inliers: c.inliers,
         verified: c.verified,

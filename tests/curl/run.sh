@@ -163,10 +163,13 @@ check "answer reports features, rule, stop, seed, timings, map" jqt '
   and .map.name == "rtabmap-loop" and .map.images == 40 and .map.words == 1000
   and (.map.vocabulary | length) == 16 and .image.width == 512' "$B"
 cp "$B" "$TMP/first.json"
-req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?top_n=3&seed=7" >/dev/null
-check "same seed gives the same candidates" test \
+# the extraction plan is learned (search.tiles ends in ,auto): the answer's
+# seed and tiles.grid replay it
+grid=$(jq -r '.tiles.grid | @uri' "$TMP/first.json")
+req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?top_n=3&seed=7&tiles=$grid" >/dev/null
+check "same seed and grid give the same candidates" test \
   "$(jq -c '[.candidates[] | [.id, .score]]' "$B")" = "$(jq -c '[.candidates[] | [.id, .score]]' "$TMP/first.json")"
-status=$(req "$B" -F "image=@$IMG" "$BASE/localize?top_n=3&seed=7")
+status=$(req "$B" -F "image=@$IMG" "$BASE/localize?top_n=3&seed=7&tiles=$grid")
 check "multipart upload gives the same answer" test \
   "$status/$(jq -c '[.candidates[].id]' "$B")" = "200/$(jq -c '[.candidates[].id]' "$TMP/first.json")"
 status=$(req "$B" -H 'Content-Type: application/octet-stream' --data-binary @"$IMG" "$BASE/localize")
