@@ -8,18 +8,27 @@
 # the whole-image full search (mean and median over seeds × queries × runs).
 #
 #   scripts/plans-check.sh [OUT]      (default OUT: data/eval/plans)
+#
+# The environment changes what is compared: SETTINGS (RULE=VALUE@WARMUP
+# settings besides the full search; default "peak-mean=1.6@20 verified=8"),
+# VERIFY (yes or no; default yes), PLANS (default "2x2+24 2x2+24,coarse")
+# and DATASETS (NAME:WORDS, default "rtabmap-loop:1000 gardens-point:5000").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-data/eval/plans}
+settings=()
+for s in ${SETTINGS:-peak-mean=1.6@20 verified=8}; do settings+=(--set "$s"); done
+verify=()
+[ "${VERIFY:-yes}" = yes ] && verify=(--verify)
 [ -x target/release/bowloc ] || cargo build --release
-for dataset in rtabmap-loop:1000 gardens-point:5000; do
+for dataset in ${DATASETS:-rtabmap-loop:1000 gardens-point:5000}; do
   name=${dataset%%:*}
   words=${dataset##*:}
-  for plan in 2x2+24 2x2+24,coarse; do
+  for plan in ${PLANS:-2x2+24 2x2+24,coarse}; do
     dir="$out/$name-$plan"
     ./target/release/bowloc --log warn eval --dataset "../shared/datasets/$name" --words "$words" \
-      --runs 3 --vocab-seeds 3 --rules none --tiles "$plan" --verify \
-      --set peak-mean=1.6@20 --set verified=8 --no-plots --out "$dir" >/dev/null
+      --runs 3 --vocab-seeds 3 --rules none --tiles "$plan" "${verify[@]}" \
+      "${settings[@]}" --no-plots --out "$dir" >/dev/null
     python3 - "$dir/results.csv" "$name" "$plan" <<'PY'
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))

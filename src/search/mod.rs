@@ -210,6 +210,7 @@ impl<'m> Search<'m> {
         let rule = options.rule.build(&stop::RuleContext {
             top_n: options.top_n,
             prior: options.prior.clone(),
+            place_window: options.place_window,
         });
         let mut voter = Voter::with_needs(&map.view(), rule.needs());
         if let Some(weights) = options.hamming {

@@ -30,15 +30,23 @@ pub struct Ranked {
 /// at least 2·window + 2 entries (or every voted image) for the answer to
 /// be exact: at most 2·window + 1 of them lie in j's place.
 pub fn distinctness(j: u32, h: f32, leaders: &[(f32, u32)], window: u32) -> f32 {
-    let elsewhere = leaders
-        .iter()
-        .find(|&&(_, k)| k.abs_diff(j) > window)
-        .map_or(0.0, |e| e.0);
+    let elsewhere = elsewhere(j, leaders, window);
     if h + elsewhere > 0.0 {
         h / (h + elsewhere)
     } else {
         0.0
     }
+}
+
+/// The votes of the best image outside `j`'s place (the images within
+/// `window` ids of j) among `leaders` (value descending), 0 when none of
+/// them lies outside. Exact when `leaders` holds at least 2·window + 2
+/// entries or every voted image: a place has at most 2·window + 1 images.
+pub fn elsewhere(j: u32, leaders: &[(f32, u32)], window: u32) -> f32 {
+    leaders
+        .iter()
+        .find(|&&(_, k)| k.abs_diff(j) > window)
+        .map_or(0.0, |e| e.0)
 }
 
 /// The `count` highest (h, id) of `ids` (ties by lower id), best first.

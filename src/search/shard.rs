@@ -307,6 +307,7 @@ pub fn search_tiles(
     let mut rule: Box<dyn StopRule> = options.rule.build(&RuleContext {
         top_n: options.top_n,
         prior: None,
+        place_window: options.place_window,
     });
     let needs = rule.needs();
     // what the shards keep: what the rule reads, and the answer's top n

@@ -9,6 +9,7 @@ mod hoeffding;
 mod lossless;
 mod none;
 mod peak_mean;
+mod place_lead;
 mod posterior;
 mod relative;
 mod stable_peak;
@@ -71,6 +72,9 @@ pub struct RuleContext {
     /// The search's prior over map images (a sequence's prediction, a pose
     /// restriction), if it has one.
     pub prior: Option<Arc<Prior>>,
+    /// The images on each side of an image, along the map's order, that
+    /// belong to its place ([`crate::search::SearchOptions::place_window`]).
+    pub place_window: u32,
 }
 
 impl Default for RuleContext {
@@ -78,6 +82,7 @@ impl Default for RuleContext {
         Self {
             top_n: 1,
             prior: None,
+            place_window: crate::search::SearchOptions::PLACE_WINDOW,
         }
     }
 }
@@ -229,6 +234,7 @@ pub fn rules_markdown() -> String {
 pub const RULES: &[RuleInfo] = &[
     none::INFO,
     peak_mean::INFO,
+    place_lead::INFO,
     relative::INFO,
     stable_peak::INFO,
     hoeffding::INFO,

@@ -7,8 +7,13 @@ use crate::index::{ImageWords, MapBuilder, MapIndex};
 use crate::search::vote::{Needs, VoteStats, Voter};
 
 fn one_word_per_image() -> MapIndex {
-    let mut b = MapBuilder::new(4);
-    for j in 0..4u32 {
+    one_word_each(4)
+}
+
+/// A map of `images` images, image j holding only word j.
+fn one_word_each(images: u32) -> MapIndex {
+    let mut b = MapBuilder::new(images as usize);
+    for j in 0..images {
         b.add(ImageWords::from_words(format!("{j}"), &[j]));
     }
     b.build("t", "0", None)
@@ -409,4 +414,71 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     assert_eq!(checked_at, [1, 2, 3, 5, 8, 12, 18, 27, 41, 62, 93]);
     assert!(RuleSpec::new("verified", Some(3.0)).is_err());
     assert!(RuleSpec::new("verified", Some(8.5)).is_err());
+}
+
+/// The feature count at which `rule` stops on `stream` over a map of `images`
+/// images (image j holds only word j), the voter tracking what the rule needs.
+fn stops_at_in_place(
+    spec: RuleSpec,
+    images: u32,
+    place_window: u32,
+    stream: &[u32],
+) -> Option<usize> {
+    let map = one_word_each(images);
+    let view = map.view();
+    let mut rule = spec.build(&RuleContext {
+        place_window,
+        ..Default::default()
+    });
+    let mut voter = Voter::with_needs(&view, rule.needs());
+    for &w in stream {
+        voter.vote(w, 0);
+        if rule.check(&voter).is_some() {
+            return Some(voter.tally().features);
+        }
+    }
+    None
+}
+
+#[test]
+fn place_lead_compares_the_leader_with_the_best_other_place() {
+    // 8 images, a vote u = ln 8 each. Along [0,1,1,0,0,5,0] the leader and
+    // the best image outside its place are, with a place of ±1 image:
+    // (0: u, –), (0: u, –), (1: 2u, –), (0: 2u, –), (0: 3u, –), (0: 3u, 5: u),
+    // (0: 4u, 5: u): leads u, u, 2u, 2u, 3u, 2u, 3u.
+    let u = 8f64.ln();
+    let s = [0, 1, 1, 0, 0, 5, 0];
+    let lead = |t| spec("place-lead", t);
+    assert_eq!(stops_at_in_place(lead(1.5 * u), 8, 1, &s), Some(3));
+    assert_eq!(stops_at_in_place(lead(2.5 * u), 8, 1, &s), Some(5));
+    assert_eq!(stops_at_in_place(lead(3.5 * u), 8, 1, &s), None);
+    // each image its own place: image 1 is a rival of image 0, leads
+    // u, 0, u, 0, u, u, 2u
+    assert_eq!(stops_at_in_place(lead(1.5 * u), 8, 0, &s), Some(7));
+    assert_eq!(stops_at_in_place(lead(0.5 * u), 8, 0, &s), Some(1));
+}
+
+#[test]
+fn place_lead_reads_enough_leaders_to_find_another_place() {
+    // 12 images, a place of ±2: the five images of image 2's place lead
+    // (4u, 3u, 3u, 2u, 2u) and the best image elsewhere, 9 (u), is only the
+    // sixth best: the rule must track enough leaders to see it.
+    let map = one_word_each(12);
+    let view = map.view();
+    let rule = spec("place-lead", 1.0).build(&RuleContext {
+        place_window: 2,
+        ..Default::default()
+    });
+    let mut voter = Voter::with_needs(&view, rule.needs());
+    for w in [9, 2, 2, 2, 2, 1, 1, 1, 3, 3, 3, 0, 0, 4, 4] {
+        voter.vote(w, 0);
+    }
+    let u = 12f64.ln();
+    let (lead, threshold) = rule.statistic(&voter).unwrap();
+    assert!(
+        (lead - 3.0 * u).abs() < 1e-4,
+        "lead {lead}, expected {}",
+        3.0 * u
+    );
+    assert_eq!(threshold, 1.0);
 }
