@@ -20,8 +20,8 @@
 //! once: [`auto_warmup`] adapts it to the queries' feature count.
 
 use crate::eval::sweep::{
-    Setting, bisect_edge, format_parameter, parameter_range, round_significant_toward, search_one,
-    seed,
+    Ranking, Setting, bisect_edge, format_parameter, parameter_range, round_significant_toward,
+    search_one, seed,
 };
 use crate::index::{ImageWords, MapBuilder, MapIndex};
 use crate::search::{CodedFeatures, RuleSpec};
@@ -125,7 +125,13 @@ pub fn measure(
         .flat_map(|run| (0..queries.len()).into_par_iter().map(move |q| (run, q)))
         .filter(|&(_, q)| full_top1[q].is_some())
         .map(|(run, q)| {
-            let o = search_one(map, queries[q].known(), setting, seed(run, q), 1);
+            let o = search_one(
+                map,
+                queries[q].known(),
+                setting,
+                seed(run, q),
+                Ranking::top(1),
+            );
             let top = o.candidates.first().map(|c| c.id);
             ((top != full_top1[q]) as usize, o.fraction(), 1usize)
         })
@@ -140,7 +146,7 @@ pub fn full_top1(map: &MapIndex, queries: &[CodedFeatures]) -> Vec<Option<u32>> 
     queries
         .par_iter()
         .map(|w| {
-            search_one(map, w.known(), &none, 0, 1)
+            search_one(map, w.known(), &none, 0, Ranking::top(1))
                 .candidates
                 .first()
                 .map(|c| c.id)

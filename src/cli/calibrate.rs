@@ -11,7 +11,7 @@ use bowloc::calibrate::{
     pseudo_queries, server_config,
 };
 use bowloc::dataset::Dataset;
-use bowloc::eval::sweep::{Setting, format_parameter, search_one, seed};
+use bowloc::eval::sweep::{Ranking, Setting, format_parameter, search_one, seed};
 use bowloc::features::DecodeLimits;
 use bowloc::index::MapIndex;
 use bowloc::pipeline::{extract_all, progress_bar, words_per_image};
@@ -259,7 +259,7 @@ fn recall_at_1(
                 continue;
             }
             n += 1;
-            let o = search_one(map, words.known(), s, seed(run, q), 1);
+            let o = search_one(map, words.known(), s, seed(run, q), Ranking::top(1));
             hits += o
                 .candidates
                 .first()

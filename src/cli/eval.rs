@@ -59,6 +59,11 @@ pub struct EvalArgs {
     /// pass first). The full search also runs on whole queries.
     #[arg(long, default_value = "2x2+24")]
     tiles: TileGrid,
+    /// Images on each side, along the map's order, that count as one place
+    /// when a candidate's distinctness is measured (and for the rule
+    /// place-lead).
+    #[arg(long, default_value_t = bowloc::search::SearchOptions::PLACE_WINDOW)]
+    place_window: u32,
     #[command(flatten)]
     extract: ExtractArgs,
     /// With --verify: rows with and without geometric verification for the
@@ -103,6 +108,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         histogram: a.histogram,
         extract: a.extract.config(),
         tiles: a.tiles,
+        place_window: a.place_window,
         vocab: a.vocab,
         out: a
             .out

@@ -148,6 +148,9 @@ pub struct EvalConfig {
     pub opencv: OpenCvInfo,
     /// Also verify the full search and the explicit settings geometrically.
     pub verify: Option<crate::geometry::verify::VerifyParams>,
+    /// Images on each side, along the map's order, that belong to an
+    /// image's place: for distinctness and the rule `place-lead`.
+    pub place_window: u32,
 }
 
 /// The dataset as evaluated.
@@ -181,6 +184,8 @@ pub struct ConfigInfo {
     pub targets: Vec<f64>,
     pub precision: f64,
     pub top_n: [usize; 3],
+    /// Images on each side of a candidate that make its place.
+    pub place_window: u32,
     pub tolerance: f64,
     pub extract: ExtractConfig,
     /// The queries' tile grid, `COLSxROWS+MARGIN`.
@@ -554,6 +559,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         &grids,
         &warmups,
         &config.targets,
+        config.place_window,
         &bar,
     )?;
     bar.finish_and_clear();
@@ -591,12 +597,15 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         "sweeping"
     );
 
-    let top_n = summary::TOP_N.iter().copied().max().unwrap_or(10);
+    let ranking = sweep::Ranking {
+        top_n: summary::TOP_N.iter().copied().max().unwrap_or(10),
+        place_window: config.place_window,
+    };
     let bar = progress_bar((counts.len() * seeds.len()) as u64, "sweeping");
     let outcomes: Vec<Vec<Vec<Vec<Outcome>>>> = maps
         .iter()
         .zip(&per_seed)
-        .map(|(map, q)| sweep::run_all(map, &q.queries, &settings, config.runs, top_n, &bar))
+        .map(|(map, q)| sweep::run_all(map, &q.queries, &settings, config.runs, ranking, &bar))
         .collect();
     bar.finish_and_clear();
     let tiles_total: Vec<usize> = per_seed[0]
@@ -622,7 +631,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             .zip(whole)
             .map(|(map, q)| {
                 let mut o =
-                    sweep::run_all(map, &q.queries, &settings[..1], config.runs, top_n, &bar);
+                    sweep::run_all(map, &q.queries, &settings[..1], config.runs, ranking, &bar);
                 o.swap_remove(0)
             })
             .collect();
@@ -763,6 +772,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             targets: config.targets.clone(),
             precision: summary::PRECISION,
             top_n: summary::TOP_N,
+            place_window: config.place_window,
             tolerance: config.tolerance,
             extract,
             tiles: config.tiles.to_string(),

@@ -167,7 +167,7 @@ fn compare(
             // the shards hold no signatures: both searches vote plain tf-idf
             let options = SearchOptions {
                 hamming: None,
-                ..setting.options(sweep::seed(run, q), config.top_n)
+                ..setting.options(sweep::seed(run, q), sweep::Ranking::top(config.top_n))
             };
             let one = query.search(map, &options, false).outcome;
             let (_, spans) = query.tile_order(options.seed);

@@ -108,13 +108,33 @@ impl Setting {
     }
 
     /// Search options for one query of one run.
-    pub fn options(&self, seed: u64, top_n: usize) -> SearchOptions {
+    pub fn options(&self, seed: u64, ranking: Ranking) -> SearchOptions {
         SearchOptions {
             rule: self.rule.clone(),
-            top_n,
+            top_n: ranking.top_n,
+            place_window: ranking.place_window,
             seed,
             min_features: self.min_features,
             ..SearchOptions::default()
+        }
+    }
+}
+
+/// How every search of a sweep ranks its answer: the candidates it keeps,
+/// and the place window their distinctness (and the rule `place-lead`) is
+/// measured with.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ranking {
+    pub top_n: usize,
+    pub place_window: u32,
+}
+
+impl Ranking {
+    /// The top `n`, with the service's default place window.
+    pub fn top(n: usize) -> Self {
+        Self {
+            top_n: n,
+            place_window: SearchOptions::PLACE_WINDOW,
         }
     }
 }
@@ -233,9 +253,9 @@ pub fn search_one(
     features: KnownFeatures<'_>,
     setting: &Setting,
     seed: u64,
-    top_n: usize,
+    ranking: Ranking,
 ) -> Outcome {
-    let o = search_words(map, features, &setting.options(seed, top_n));
+    let o = search_words(map, features, &setting.options(seed, ranking));
     Outcome {
         candidates: o.candidates,
         used: o.features_used as u32,
@@ -255,9 +275,9 @@ pub fn search_query(
     query: &Query,
     setting: &Setting,
     seed: u64,
-    top_n: usize,
+    ranking: Ranking,
 ) -> Outcome {
-    let r = query.search(map, &setting.options(seed, top_n), setting.verify);
+    let r = query.search(map, &setting.options(seed, ranking), setting.verify);
     Outcome {
         candidates: r.outcome.candidates,
         used: r.outcome.features_used as u32,
@@ -271,12 +291,23 @@ pub fn search_query(
     }
 }
 
-/// Mean fraction of features `setting` uses over all queries in `run`.
-pub fn mean_fraction(map: &MapIndex, queries: &[Query], setting: &Setting, run: u32) -> f64 {
+/// Mean fraction of features `setting` uses over all queries in `run`, an
+/// image's place being the `place_window` images on each side.
+pub fn mean_fraction(
+    map: &MapIndex,
+    queries: &[Query],
+    setting: &Setting,
+    run: u32,
+    place_window: u32,
+) -> f64 {
+    let ranking = Ranking {
+        top_n: 1,
+        place_window,
+    };
     let total: f64 = queries
         .par_iter()
         .enumerate()
-        .map(|(q, query)| search_query(map, query, setting, seed(run, q), 1).fraction())
+        .map(|(q, query)| search_query(map, query, setting, seed(run, q), ranking).fraction())
         .sum();
     total / queries.len().max(1) as f64
 }
@@ -385,6 +416,7 @@ pub fn calibrate(
     (lo, hi, whole): (f64, f64, bool),
     min_features: usize,
     targets: &[f64],
+    place_window: u32,
     bar: &ProgressBar,
 ) -> anyhow::Result<Vec<Calibration>> {
     let setting = |p: f64| -> anyhow::Result<Setting> {
@@ -401,7 +433,7 @@ pub fn calibrate(
             return v;
         }
         let s = setting(p).expect("within the checked range");
-        let v = mean_fraction(map, queries, &s, CALIBRATION_RUN);
+        let v = mean_fraction(map, queries, &s, CALIBRATION_RUN, place_window);
         memo.lock().expect("not poisoned").insert(p.to_bits(), v);
         v
     };
@@ -452,6 +484,7 @@ pub fn plan(
     grids: &[&RuleGrid],
     warmups: &[usize],
     targets: &[f64],
+    place_window: u32,
     bar: &ProgressBar,
 ) -> anyhow::Result<(Vec<Setting>, Vec<Calibration>)> {
     let first = warmups.first().copied().unwrap_or(0);
@@ -468,7 +501,16 @@ pub fn plan(
             }
             Grid::Calibrated { lo, hi, whole } => {
                 for &w in warmups {
-                    let found = calibrate(map, queries, g.rule, (lo, hi, whole), w, targets, bar)?;
+                    let found = calibrate(
+                        map,
+                        queries,
+                        g.rule,
+                        (lo, hi, whole),
+                        w,
+                        targets,
+                        place_window,
+                        bar,
+                    )?;
                     let mut seen: Vec<f64> = Vec::new();
                     for c in &found {
                         if seen.contains(&c.parameter) {
@@ -495,7 +537,7 @@ pub fn run_all(
     queries: &[Query],
     settings: &[Setting],
     runs: u32,
-    top_n: usize,
+    ranking: Ranking,
     bar: &ProgressBar,
 ) -> Vec<Vec<Vec<Outcome>>> {
     let per_query: Vec<Vec<Outcome>> = queries
@@ -505,7 +547,7 @@ pub fn run_all(
             let mut out = Vec::with_capacity(settings.len() * runs as usize);
             for s in settings {
                 for run in 0..runs {
-                    out.push(search_query(map, query, s, seed(run, q), top_n));
+                    out.push(search_query(map, query, s, seed(run, q), ranking));
                 }
             }
             bar.inc(1);
@@ -618,7 +660,7 @@ mod tests {
             Setting::new(RuleSpec::new("fixed", Some(0.5)).unwrap(), 0),
         ];
         let bar = ProgressBar::hidden();
-        let r = run_all(&map, &queries, &settings, 3, 2, &bar);
+        let r = run_all(&map, &queries, &settings, 3, Ranking::top(2), &bar);
         assert_eq!((r.len(), r[0].len(), r[0][0].len()), (2, 3, 5));
         for run in &r[0] {
             assert!(run.iter().all(|o| o.used == 40 && o.fraction() == 1.0));
@@ -626,7 +668,8 @@ mod tests {
         for run in &r[1] {
             assert!(run.iter().all(|o| o.used == 20 && o.candidates.len() <= 2));
         }
-        assert_eq!(mean_fraction(&map, &queries, &settings[1], 0), 0.5);
+        let window = SearchOptions::PLACE_WINDOW;
+        assert_eq!(mean_fraction(&map, &queries, &settings[1], 0, window), 0.5);
     }
 
     #[test]
@@ -645,6 +688,7 @@ mod tests {
             (0.2, 1.0, false),
             0,
             &[0.1, 0.5],
+            SearchOptions::PLACE_WINDOW,
             &bar,
         )
         .unwrap();
@@ -659,6 +703,7 @@ mod tests {
             &[rule_grid("stable-peak").unwrap()],
             &[40],
             &[0.5],
+            SearchOptions::PLACE_WINDOW,
             &bar,
         )
         .unwrap();
@@ -691,6 +736,7 @@ mod tests {
             (0.01, 1.0, false),
             0,
             &[0.3, 0.7],
+            SearchOptions::PLACE_WINDOW,
             &bar,
         )
         .unwrap();
@@ -711,6 +757,7 @@ mod tests {
             ],
             &[0, 5],
             &[0.5, 0.9],
+            SearchOptions::PLACE_WINDOW,
             &bar,
         )
         .unwrap();
