@@ -103,7 +103,8 @@ pub struct SearchArgs {
     #[arg(long)]
     pub no_hamming: bool,
     /// Images on each side, along the map's order, that count as one place when a candidate's distinctness is measured.
-    #[arg(long, default_value_t = SearchOptions::recommended().place_window)]
+    #[arg(long, default_value_t = SearchOptions::recommended().place_window,
+          value_parser = clap::value_parser!(u32).range(0..=SearchOptions::MAX_PLACE_WINDOW as i64))]
     pub place_window: u32,
 }
 

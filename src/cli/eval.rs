@@ -5,6 +5,7 @@ use super::args::{ExtractArgs, SequenceArgs, VerifyArgs, dataset_name, vocab_see
 use bowloc::eval::machine::OpenCvInfo;
 use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig, Warmup};
 use bowloc::features::TileGrid;
+use bowloc::search::SearchOptions;
 use clap::Args;
 use std::path::PathBuf;
 
@@ -62,7 +63,8 @@ pub struct EvalArgs {
     /// Images on each side, along the map's order, that count as one place
     /// when a candidate's distinctness is measured (and for the rule
     /// place-lead).
-    #[arg(long, default_value_t = bowloc::search::SearchOptions::PLACE_WINDOW)]
+    #[arg(long, default_value_t = SearchOptions::PLACE_WINDOW,
+          value_parser = clap::value_parser!(u32).range(0..=SearchOptions::MAX_PLACE_WINDOW as i64))]
     place_window: u32,
     #[command(flatten)]
     extract: ExtractArgs,

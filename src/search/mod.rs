@@ -96,6 +96,10 @@ impl SearchOptions {
     /// The place window distinctness is measured with (docs/results.md,
     /// "Distinctness").
     pub const PLACE_WINDOW: u32 = 2;
+    /// The widest place window accepted: a place is a stretch of a route,
+    /// and a rule comparing with the best image outside it tracks
+    /// 2·window + 2 leading images.
+    pub const MAX_PLACE_WINDOW: u32 = 1000;
 
     /// The settings the service, the CLI and the configuration default to:
     /// the rule, parameter and warm-up chosen by evaluation

@@ -175,10 +175,13 @@ fn better(a: (f32, u32), b: (f32, u32)) -> bool {
 }
 
 impl TopK {
+    /// Room for `k` entries; the list grows as images get votes, so a `k`
+    /// larger than the map (a rule asking for a place wider than it) costs
+    /// no more than the images voted for.
     pub fn new(k: usize) -> Self {
         Self {
             k: k.max(1),
-            items: Vec::with_capacity(k.max(1)),
+            items: Vec::with_capacity(k.clamp(1, 64)),
         }
     }
 

@@ -526,6 +526,16 @@ impl Config {
                 format!("must be a finite number ≥ 0, got {}", s.min_score),
             );
         }
+        if s.place_window > SearchOptions::MAX_PLACE_WINDOW {
+            return bad(
+                "search.place_window",
+                format!(
+                    "must be at most {}, got {}",
+                    SearchOptions::MAX_PLACE_WINDOW,
+                    s.place_window
+                ),
+            );
+        }
         if self.server.opencv_threads == 0 {
             return bad("server.opencv_threads", "must be at least 1".into());
         }
@@ -750,6 +760,7 @@ mod tests {
             ("[search]\ntop_n = 0\n", "search.top_n"),
             ("[search]\ntop_n = 101\n", "search.top_n"),
             ("[search]\nblock = 0\n", "search.block"),
+            ("[search]\nplace_window = 1001\n", "search.place_window"),
             ("[limits]\ndeadline_ms = 0\n", "limits.deadline_ms"),
             ("[server]\nmax_connections = 0\n", "server.max_connections"),
             (
