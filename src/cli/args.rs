@@ -51,6 +51,14 @@ impl ExtractArgs {
 }
 
 /// The rule names with their one-line descriptions, from the registry.
+/// A place window, checked as the configuration checks it.
+pub fn place_window(text: &str) -> Result<u32, String> {
+    let window: u32 = text
+        .parse()
+        .map_err(|e| format!("not a whole number ≥ 0: {e}"))?;
+    SearchOptions::check_place_window(window)
+}
+
 fn rule_parser() -> PossibleValuesParser {
     PossibleValuesParser::new(
         RULES
@@ -103,8 +111,7 @@ pub struct SearchArgs {
     #[arg(long)]
     pub no_hamming: bool,
     /// Images on each side, along the map's order, that count as one place when a candidate's distinctness is measured.
-    #[arg(long, default_value_t = SearchOptions::recommended().place_window,
-          value_parser = clap::value_parser!(u32).range(0..=SearchOptions::MAX_PLACE_WINDOW as i64))]
+    #[arg(long, default_value_t = SearchOptions::recommended().place_window, value_parser = place_window)]
     pub place_window: u32,
 }
 

@@ -1,7 +1,7 @@
 //! `bowloc eval`: reproduce the paper's evaluation on a dataset in the shared
 //! layout (tables, CSV, JSON and plots in `--out`).
 
-use super::args::{ExtractArgs, SequenceArgs, VerifyArgs, dataset_name, vocab_seeds};
+use super::args::{ExtractArgs, SequenceArgs, VerifyArgs, dataset_name, place_window, vocab_seeds};
 use bowloc::eval::machine::OpenCvInfo;
 use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig, Warmup};
 use bowloc::features::TileGrid;
@@ -63,8 +63,7 @@ pub struct EvalArgs {
     /// Images on each side, along the map's order, that count as one place
     /// when a candidate's distinctness is measured (and for the rule
     /// place-lead).
-    #[arg(long, default_value_t = SearchOptions::PLACE_WINDOW,
-          value_parser = clap::value_parser!(u32).range(0..=SearchOptions::MAX_PLACE_WINDOW as i64))]
+    #[arg(long, default_value_t = SearchOptions::PLACE_WINDOW, value_parser = place_window)]
     place_window: u32,
     #[command(flatten)]
     extract: ExtractArgs,

@@ -101,6 +101,19 @@ impl SearchOptions {
     /// 2·window + 2 leading images.
     pub const MAX_PLACE_WINDOW: u32 = 1000;
 
+    /// `window` if it is an accepted place window, else why not: the one
+    /// check behind the configuration and every `--place-window`.
+    pub fn check_place_window(window: u32) -> Result<u32, String> {
+        if window <= Self::MAX_PLACE_WINDOW {
+            Ok(window)
+        } else {
+            Err(format!(
+                "must be at most {}, got {window}",
+                Self::MAX_PLACE_WINDOW
+            ))
+        }
+    }
+
     /// The settings the service, the CLI and the configuration default to:
     /// the rule, parameter and warm-up chosen by evaluation
     /// (docs/results.md, "The default rule").

@@ -526,15 +526,8 @@ impl Config {
                 format!("must be a finite number ≥ 0, got {}", s.min_score),
             );
         }
-        if s.place_window > SearchOptions::MAX_PLACE_WINDOW {
-            return bad(
-                "search.place_window",
-                format!(
-                    "must be at most {}, got {}",
-                    SearchOptions::MAX_PLACE_WINDOW,
-                    s.place_window
-                ),
-            );
+        if let Err(e) = SearchOptions::check_place_window(s.place_window) {
+            return bad("search.place_window", e);
         }
         if self.server.opencv_threads == 0 {
             return bad("server.opencv_threads", "must be at least 1".into());
