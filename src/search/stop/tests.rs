@@ -22,11 +22,33 @@ fn one_word_each(images: u32) -> MapIndex {
 /// The feature count (1-based) at which `rule` stops on `stream`, checking
 /// from feature `from` on; `None` if it never does.
 fn stops_at(spec: RuleSpec, stream: &[u32], total: usize, from: usize) -> Option<usize> {
-    let map = one_word_per_image();
+    stops_on(
+        &one_word_per_image(),
+        &RuleContext::default(),
+        spec,
+        stream,
+        Some(total),
+        from,
+    )
+}
+
+/// The feature count at which `rule`, built in `context`, stops on `stream`
+/// over `map`, checking from feature `from` on, the voter tracking what the
+/// rule needs and knowing the query's `total` features if given.
+fn stops_on(
+    map: &MapIndex,
+    context: &RuleContext,
+    spec: RuleSpec,
+    stream: &[u32],
+    total: Option<usize>,
+    from: usize,
+) -> Option<usize> {
     let view = map.view();
-    let mut voter = Voter::new(&view);
-    voter.set_total(total);
-    let mut rule = spec.build(&RuleContext::default());
+    let mut rule = spec.build(context);
+    let mut voter = Voter::with_needs(&view, rule.needs());
+    if let Some(n) = total {
+        voter.set_total(n);
+    }
     for &w in stream {
         voter.vote(w, 0);
         if voter.tally().features >= from && rule.check(&voter).is_some() {
@@ -416,28 +438,19 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     assert!(RuleSpec::new("verified", Some(8.5)).is_err());
 }
 
-/// The feature count at which `rule` stops on `stream` over a map of `images`
-/// images (image j holds only word j), the voter tracking what the rule needs.
+/// [`stops_on`] a map of `images` images, image j holding only word j, with
+/// places of `place_window` images on each side.
 fn stops_at_in_place(
     spec: RuleSpec,
     images: u32,
     place_window: u32,
     stream: &[u32],
 ) -> Option<usize> {
-    let map = one_word_each(images);
-    let view = map.view();
-    let mut rule = spec.build(&RuleContext {
+    let context = RuleContext {
         place_window,
         ..Default::default()
-    });
-    let mut voter = Voter::with_needs(&view, rule.needs());
-    for &w in stream {
-        voter.vote(w, 0);
-        if rule.check(&voter).is_some() {
-            return Some(voter.tally().features);
-        }
-    }
-    None
+    };
+    stops_on(&one_word_each(images), &context, spec, stream, None, 1)
 }
 
 #[test]
