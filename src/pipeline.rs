@@ -73,16 +73,25 @@ pub struct TileCost {
     pub features: usize,
     pub area: f64,
     pub extract: Duration,
+    /// FAST corners counted in the tile before extraction (0 for a whole
+    /// image), what the `richest` tile order sorts by.
+    pub corners: f32,
 }
 
 /// Extract a decoded image tile by tile in grid order, timing each tile by
-/// the thread's CPU time (OpenCV runs on the calling thread here).
+/// the thread's CPU time (OpenCV runs on the calling thread here), with
+/// each tile's corner count (counted first, its time in no tile's).
 pub fn extract_tiled(
     image: &features::GrayImage,
     config: &ExtractConfig,
     grid: TileGrid,
 ) -> Result<(Features, Vec<TileCost>), FeatureError> {
-    let mut tiles = Tiles::new(image, config, grid, |n| (0..n as u32).collect())?;
+    let mut tiles = Tiles::new(image, config, grid, None)?;
+    let corners = match grid.cols * grid.rows > 1 {
+        true => tiles.corners()?,
+        false => Vec::new(),
+    };
+    let coarse = usize::from(grid.coarse);
     let mut parts = Vec::with_capacity(tiles.total());
     let mut costs = Vec::with_capacity(tiles.total());
     let mut area = 0.0;
@@ -91,10 +100,15 @@ pub fn extract_tiled(
         let Some(tile) = tiles.next_tile() else { break };
         let tile = tile?;
         let share = tiles.area_extracted();
+        let unit = costs.len();
         costs.push(TileCost {
             features: tile.len(),
             area: share - area,
             extract: started.elapsed(),
+            corners: unit
+                .checked_sub(coarse)
+                .and_then(|t| corners.get(t).copied())
+                .unwrap_or(0.0),
         });
         area = share;
         parts.push(tile);
@@ -487,7 +501,8 @@ impl Localizer {
     }
 
     /// Answer one query image given as encoded bytes: decode, then extract
-    /// tile after tile (in a random order drawn from the seed) and feed each
+    /// tile after tile (in the options' tile order, richest first by default)
+    /// and feed each
     /// tile's features to the search, until the search stops or the tiles
     /// run out.
     pub fn localize(
@@ -572,9 +587,12 @@ impl Localizer {
             width: image.width(),
             height: image.height(),
         };
-        let mut tiles = Tiles::new(&image, &self.extract, grid, |n| {
-            search::permute::tile_order(n, grid.coarse, options.seed)
-        })?;
+        let mut tiles = Tiles::new(
+            &image,
+            &self.extract,
+            grid,
+            Some((options.tile_order, options.seed)),
+        )?;
         let mut extract = decoded.elapsed();
         let quantizer = self.vocab.quantizer(self.quantizer);
         let snapshot = self.map.snapshot();
@@ -642,6 +660,7 @@ impl Localizer {
             tiles_extracted: tiles_used,
             tiles_total: tiles.total(),
             grid,
+            tile_order: options.tile_order,
             expected_features: search.tally().total_or_estimate(),
             complete: tiles_used == tiles.total(),
         };

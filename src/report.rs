@@ -304,7 +304,8 @@ pub struct FeatureUse {
 }
 
 /// The tiles of streaming extraction: the image is cut into a grid, tiles
-/// are extracted in a random order, and extraction ends when the search stops.
+/// are extracted richest first (or at random), and extraction ends when the
+/// search stops.
 #[derive(Debug, Clone, Copy, Serialize, ToSchema)]
 pub struct TileUse {
     /// Tiles extracted.
@@ -315,6 +316,11 @@ pub struct TileUse {
     #[schema(value_type = String, example = "2x2+24")]
     #[serde(serialize_with = "crate::report::display")]
     pub grid: TileGrid,
+    /// The order the tiles were extracted in: `richest` (most FAST corners
+    /// first) or `random`.
+    #[schema(value_type = String, example = "richest")]
+    #[serde(serialize_with = "crate::report::display")]
+    pub order: crate::search::TileOrder,
 }
 
 fn display<T: std::fmt::Display, S: serde::Serializer>(v: &T, s: S) -> Result<S::Ok, S::Error> {
@@ -327,6 +333,7 @@ pub struct Extraction {
     pub tiles_extracted: usize,
     pub tiles_total: usize,
     pub grid: TileGrid,
+    pub tile_order: crate::search::TileOrder,
     /// N, or its estimate while tiles were left.
     pub expected_features: f64,
     /// Every tile was extracted.
@@ -491,6 +498,7 @@ impl Localization {
                 extracted: extraction.tiles_extracted,
                 total: extraction.tiles_total,
                 grid: extraction.grid,
+                order: extraction.tile_order,
             },
             rule: rule.into(),
             stop: outcome.stop,

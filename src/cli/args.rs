@@ -113,6 +113,9 @@ pub struct SearchArgs {
     /// Images on each side, along the map's order, that count as one place when a candidate's distinctness is measured.
     #[arg(long, default_value_t = SearchOptions::recommended().place_window, value_parser = place_window)]
     pub place_window: u32,
+    /// The order tiles are extracted in: richest (most FAST corners first) or random.
+    #[arg(long, default_value_t = SearchOptions::recommended().tile_order)]
+    pub tile_order: bowloc::search::TileOrder,
 }
 
 impl SearchArgs {
@@ -158,6 +161,7 @@ impl SearchArgs {
                 recommended.hamming
             },
             place_window: self.place_window,
+            tile_order: self.tile_order,
         })
     }
 }

@@ -60,6 +60,10 @@ pub struct EvalArgs {
     /// pass first). The full search also runs on whole queries.
     #[arg(long, default_value = "2x2+24")]
     tiles: TileGrid,
+    /// The order the tiles are replayed in, as the service extracts them:
+    /// richest (most FAST corners first) or random.
+    #[arg(long, default_value_t = bowloc::search::TileOrder::default())]
+    tile_order: bowloc::search::TileOrder,
     /// Images on each side, along the map's order, that count as one place
     /// when a candidate's distinctness is measured (and for the rule
     /// place-lead).
@@ -110,6 +114,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         extract: a.extract.config(),
         tiles: a.tiles,
         place_window: a.place_window,
+        tile_order: a.tile_order,
         vocab: a.vocab,
         out: a
             .out

@@ -28,8 +28,8 @@ use std::path::Path;
 
 const MAGIC: [u8; 8] = *b"BOWLOCDE";
 /// 2: keypoints beside the descriptors; 3: tiles and their times; 4: the
-/// times are thread CPU time.
-const VERSION: u32 = 4;
+/// times are thread CPU time; 5: each tile's corner count.
+const VERSION: u32 = 5;
 /// Descriptor width (SIFT).
 const DIM: usize = 128;
 /// Values per keypoint row: x, y, size, angle, response.
@@ -158,6 +158,7 @@ impl DescriptorSet {
             fixed_ms: (self.extract_ms(i) - in_tiles).max(0.0) as f32,
             tiles,
             coarse_first: self.meta.grid.coarse,
+            tile_order: Default::default(),
             geometry: None,
         }
     }
@@ -310,6 +311,7 @@ pub fn descriptors(
                     features: t.features as u32,
                     area: t.area as f32,
                     ms: ms(t.extract) as f32,
+                    corners: t.corners,
                 })
                 .collect()
         }));
@@ -419,11 +421,13 @@ mod tests {
                     features: 1,
                     area: 1.0,
                     ms: 0.5,
+                    corners: 0.0,
                 }],
                 vec![Tile {
                     features: 2,
                     area: 1.0,
                     ms: 0.5,
+                    corners: 0.0,
                 }],
             ],
         };
@@ -484,6 +488,7 @@ mod tests {
                 features: 1,
                 area: 1.0,
                 ms: 0.5,
+                corners: 0.0,
             }]],
         };
         let data = vec![0.5f32; DIM];

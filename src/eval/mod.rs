@@ -151,6 +151,8 @@ pub struct EvalConfig {
     /// Images on each side, along the map's order, that belong to an
     /// image's place: for distinctness and the rule `place-lead`.
     pub place_window: u32,
+    /// The order the queries' tiles are replayed in.
+    pub tile_order: crate::search::TileOrder,
 }
 
 /// The dataset as evaluated.
@@ -190,6 +192,8 @@ pub struct ConfigInfo {
     pub extract: ExtractConfig,
     /// The queries' tile grid, `COLSxROWS+MARGIN`.
     pub tiles: String,
+    /// The order their tiles were replayed in.
+    pub tile_order: String,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -357,6 +361,7 @@ fn validate(config: &EvalConfig) -> anyhow::Result<Vec<&'static RuleGrid>> {
 fn quantize_queries(
     set: &cache::DescriptorSet,
     vocab: &Vocabulary,
+    tile_order: crate::search::TileOrder,
     what: &str,
 ) -> (Vec<Query>, Vec<QueryCost>) {
     let quantizer = vocab.exact_quantizer();
@@ -376,7 +381,11 @@ fn quantize_queries(
             let cost = QueryCost {
                 quantize_ms_per_feature: w.quantize_ms_per_feature,
             };
-            (set.query(q, w.words, w.signatures), cost)
+            let query = Query {
+                tile_order,
+                ..set.query(q, w.words, w.signatures)
+            };
+            (query, cost)
         })
         .collect();
     bar.finish_and_clear();
@@ -520,7 +529,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         params: verify_params.clone(),
     });
     let quantize = |set: &cache::DescriptorSet, v: &Vocabulary, what: String| {
-        let (queries, costs) = quantize_queries(set, v, &what);
+        let (queries, costs) = quantize_queries(set, v, config.tile_order, &what);
         SeedWords { queries, costs }
     };
     let per_seed: Vec<SeedWords> = vocabs
@@ -776,6 +785,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             tolerance: config.tolerance,
             extract,
             tiles: config.tiles.to_string(),
+            tile_order: config.tile_order.to_string(),
         },
         machine,
         vocabularies: vocabs

@@ -99,8 +99,12 @@ fn seed_maps(config: &ShardsConfig) -> anyhow::Result<Vec<(u64, MapIndex, Vec<Qu
             };
             let vocab = cache::vocabulary(&config.cache, &map_desc, &kmeans)?;
             let map = cache::map_index(&config.cache, &vocab, &map_desc, &dataset.name)?;
-            let (queries, _) =
-                super::quantize_queries(&query_desc, &vocab, &format!("quantizing (seed {seed})"));
+            let (queries, _) = super::quantize_queries(
+                &query_desc,
+                &vocab,
+                Default::default(),
+                &format!("quantizing (seed {seed})"),
+            );
             Ok((seed, map, queries))
         })
         .collect()

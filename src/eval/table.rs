@@ -423,8 +423,10 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
         "### Time per query and stage (ms, median / p95 over seeds × queries × runs)\n\n\
          Wall time {:.1} s (extract {:.1} s, vocabularies {:.1} s, maps {:.1} s, quantize \
          queries {:.1} s, calibrate {:.1} s, sweep {:.1} s). \
-         Queries are streamed in `{}` tiles as the service does: extract = decode + SIFT of \
-         the tiles extracted (each tile timed when the query was cached); quantize = the \
+         Queries are streamed in `{}` tiles, in the `{}` tile order, as the service does: \
+         extract = decode + SIFT of the tiles extracted (each tile timed when the query was \
+         cached; the corner count that orders the tiles is in every tiled query's fixed \
+         cost); quantize = the \
          blocked exact quantizer's measured cost per feature × features used; vote = voting \
          and rule checks inside the search; verify = the `verified` rule's checks and the \
          re-ranking. `× full search`: the request time against the full search's on the same \
@@ -440,6 +442,7 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
         t.calibrate_s,
         t.sweep_s,
         report.config.tiles,
+        report.config.tile_order,
         markdown_table(&header, &rows)
     )
 }

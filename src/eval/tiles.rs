@@ -9,7 +9,7 @@ use crate::geometry::verify::{
     LeaderVerifier, ModelFit, Reranked, VerifyParams, rerank, with_keypoints,
 };
 use crate::index::MapIndex;
-use crate::search::{self, Ranked, SearchOptions, SearchOutcome, permute};
+use crate::search::{self, Ranked, SearchOptions, SearchOutcome, TileOrder, permute};
 use cpu_time::ThreadTime;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -24,6 +24,9 @@ pub struct Tile {
     pub area: f32,
     /// Extraction time, in milliseconds.
     pub ms: f32,
+    /// FAST corners counted in it before extraction (what the `richest`
+    /// tile order sorts by; 0 for the coarse pass).
+    pub corners: f32,
 }
 
 /// A query as the sweep sees it: its words in grid order (tile 0's first),
@@ -41,6 +44,8 @@ pub struct Query {
     pub fixed_ms: f32,
     /// Tile 0 is a coarse pass, extracted first ([`crate::features::TileGrid::coarse`]).
     pub coarse_first: bool,
+    /// The order the service extracts its tiles in.
+    pub tile_order: TileOrder,
     /// How to verify it geometrically (the `verified` stop and re-ranking).
     pub geometry: Option<Arc<Geometry>>,
 }
@@ -74,10 +79,11 @@ impl Query {
         }
     }
 
-    /// The tiles in the order the service extracts them for `seed`: their
-    /// numbers in grid order, and each one's features as a span of
-    /// [`words`](Self::words) with the share of the image it covers. A query
-    /// without tiles is one tile, the whole image.
+    /// The tiles in the order the service extracts them for `seed` (and
+    /// [`Query::tile_order`]): their numbers in grid order, and each one's
+    /// features as a span of [`words`](Self::words) with the share of the
+    /// image's keypoints the service expects it to hold. A query without
+    /// tiles is one tile, the whole image.
     pub fn tile_order(&self, seed: u64) -> (Vec<usize>, Vec<(usize, usize, f64)>) {
         if self.tiles.is_empty() {
             return (vec![0], vec![(0, self.words.len(), 1.0)]);
@@ -87,17 +93,23 @@ impl Query {
         for t in &self.tiles {
             starts.push(starts.last().unwrap() + t.features as usize);
         }
+        let coarse = usize::from(self.coarse_first);
+        let corners: Vec<f32> = self.tiles.iter().skip(coarse).map(|t| t.corners).collect();
+        let corners =
+            (self.tile_order == TileOrder::Richest && corners.len() > 1).then_some(&corners[..]);
         let order: Vec<usize> = if self.tiles.len() == 1 {
             vec![0]
         } else {
-            permute::tile_order(self.tiles.len(), self.coarse_first, seed)
+            permute::tile_order(self.tiles.len(), self.coarse_first, seed, corners)
                 .into_iter()
                 .map(|t| t as usize)
                 .collect()
         };
+        let area: Vec<f64> = self.tiles.iter().map(|t| t.area as f64).collect();
+        let shares = permute::expected_shares(&area, self.coarse_first, corners);
         let spans = order
             .iter()
-            .map(|&t| (starts[t], starts[t + 1], self.tiles[t].area as f64))
+            .map(|&t| (starts[t], starts[t + 1], shares[t]))
             .collect();
         (order, spans)
     }
@@ -125,7 +137,7 @@ impl Query {
     }
 
     /// Search as the service does with streaming extraction: tiles in the
-    /// order drawn from the options' seed, each tile's words fed in a random
+    /// query's tile order (ties drawn from the options' seed), each tile's words fed in a random
     /// order, no tile extracted after the search stops; with `verify`, the
     /// candidates re-ranked by geometric verification afterwards. A rule
     /// that verifies its leader (`verified`) does so with [`Query::geometry`].
@@ -233,6 +245,7 @@ mod tests {
             features: 10,
             area: 0.25,
             ms: 5.0,
+            corners: 0.0,
         };
         let q = Query {
             words: vec![0; 40],
@@ -264,5 +277,50 @@ mod tests {
             (o.features_used, o.features_total, r.tiles, r.extract_ms),
             (16, 40, 1, 0.0)
         );
+    }
+
+    #[test]
+    fn the_richest_tile_is_replayed_first_and_its_corners_set_the_estimate() {
+        let mut b = MapBuilder::new(4);
+        for j in 0..4u32 {
+            b.add(ImageWords::from_words(format!("{j}"), &[j]));
+        }
+        let map = b.build("t", "0", None);
+        // tile t's 10 features all vote for image t; tile 2 has most corners
+        let corners = [1.0, 0.0, 6.0, 3.0];
+        let q = Query {
+            words: (0..4u32).flat_map(|t| [t; 10]).collect(),
+            tiles: corners
+                .iter()
+                .map(|&c| Tile {
+                    features: 10,
+                    area: 0.25,
+                    ms: 5.0,
+                    corners: c,
+                })
+                .collect(),
+            ..Query::default()
+        };
+        let first_tiles = |q: &Query| -> std::collections::HashSet<usize> {
+            (0..32).map(|seed| q.tile_order(seed).0[0]).collect()
+        };
+        assert_eq!(first_tiles(&q), [2].into());
+        let (order, spans) = q.tile_order(7);
+        assert_eq!(order, [2, 3, 0, 1]);
+        let shares: Vec<f64> = spans.iter().map(|s| s.2).collect();
+        assert_eq!(shares, [0.6, 0.3, 0.1, 0.0]);
+        // stable-peak 5 stops inside the first tile, on image 2
+        let early = SearchOptions {
+            rule: RuleSpec::new("stable-peak", Some(5.0)).unwrap(),
+            ..SearchOptions::default()
+        };
+        let r = q.search(&map, &early, false);
+        assert_eq!((r.tiles, r.outcome.candidates[0].id), (1, 2));
+        // at random, other tiles come first too
+        let random = Query {
+            tile_order: TileOrder::Random,
+            ..q.clone()
+        };
+        assert!(first_tiles(&random).len() > 1);
     }
 }

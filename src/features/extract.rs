@@ -64,6 +64,15 @@ impl Frame {
         })
     }
 
+    /// FAST corners counted in each of `cores` (frame coordinates), a guess
+    /// of where the keypoints are ([`super::corners`]).
+    pub fn corners_per_core(
+        &self,
+        cores: &[(u32, u32, u32, u32)],
+    ) -> Result<Vec<f32>, FeatureError> {
+        super::corners::corners_per_core(&self.mat, cores)
+    }
+
     /// Width and height of the extraction frame.
     pub fn size(&self) -> (u32, u32) {
         (self.mat.cols().max(0) as u32, self.mat.rows().max(0) as u32)

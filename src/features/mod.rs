@@ -4,6 +4,7 @@
 
 mod coarse_choice;
 mod config;
+mod corners;
 mod decode;
 mod extract;
 pub mod fit;

@@ -11,6 +11,7 @@
 //! upsampled frame), so again every keypoint is found once.
 
 use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage, Scales};
+use crate::search::permute::{self, TileOrder};
 use serde::{Deserialize, Serialize};
 
 /// How a query is cut into tiles.
@@ -192,43 +193,71 @@ pub struct Tiles {
     margin: u32,
     /// The units in extraction order: the coarse pass (if any) first.
     order: Vec<Unit>,
+    /// Each unit's expected share of the image's keypoints, by unit number
+    /// (the coarse pass first).
+    shares: Vec<f64>,
+    /// FAST corners per tile (grid order), once counted.
+    corners: Option<Vec<f32>>,
     next: usize,
     /// Keypoints the image may keep (0 = all), shared out over the units.
     cap: usize,
 }
 
 impl Tiles {
-    /// Prepare `image` for tiled extraction. `order(n)` gives the order of the
-    /// n units (a permutation of 0..n; with a coarse pass, unit 0 is the
-    /// coarse pass and must come first, unit i > 0 is tile i − 1); the grid
-    /// may have been coarsened for a small image, so n is known only here.
+    /// Prepare `image` for tiled extraction: in grid order (the coarse pass
+    /// first) when `order` is `None`, else in the search's [`TileOrder`]
+    /// drawn from its seed ([`permute::tile_order`]). Ordering by corners
+    /// counts them first, and then also shares the expected keypoints out by
+    /// them ([`permute::expected_shares`]). The grid may have been coarsened
+    /// for a small image, so the number of units is known only here.
     pub fn new(
         image: &GrayImage,
         config: &ExtractConfig,
         grid: TileGrid,
-        order: impl FnOnce(usize) -> Vec<u32>,
+        order: Option<(TileOrder, u64)>,
     ) -> Result<Self, FeatureError> {
         let frame = Frame::new(image, config)?;
         let (w, h) = frame.size();
         let cores = grid.cores(w, h);
         let n = cores.len() + usize::from(grid.coarse);
-        let order: Vec<Unit> = order(n)
+        let all = (w as f64 * h as f64).max(1.0);
+        let fine = if grid.coarse {
+            1.0 - TileGrid::COARSE_SHARE
+        } else {
+            1.0
+        };
+        let area: Vec<f64> = grid
+            .coarse
+            .then_some(TileGrid::COARSE_SHARE)
             .into_iter()
-            .map(|u| match (grid.coarse, u as usize) {
-                (true, 0) => Unit::Coarse,
-                (true, u) => Unit::Tile(u - 1),
-                (false, u) => Unit::Tile(u),
-            })
+            .chain(cores.iter().map(|c| fine * c.2 as f64 * c.3 as f64 / all))
             .collect();
-        debug_assert_eq!(order.len(), n);
-        debug_assert!(!grid.coarse || order[0] == Unit::Coarse);
-        let n = cores.len();
+        let corners = match order {
+            Some((TileOrder::Richest, _)) if cores.len() > 1 => {
+                Some(frame.corners_per_core(&cores)?)
+            }
+            _ => None,
+        };
+        let shares = permute::expected_shares(&area, grid.coarse, corners.as_deref());
+        let order: Vec<Unit> = match order {
+            Some((_, seed)) => permute::tile_order(n, grid.coarse, seed, corners.as_deref()),
+            None => (0..n as u32).collect(),
+        }
+        .into_iter()
+        .map(|u| match (grid.coarse, u as usize) {
+            (true, 0) => Unit::Coarse,
+            (true, u) => Unit::Tile(u - 1),
+            (false, u) => Unit::Tile(u),
+        })
+        .collect();
         let cap = config.sift.max_features as usize;
         Ok(Self {
+            margin: if cores.len() == 1 { 0 } else { grid.margin },
             frame,
             cores,
-            margin: if n == 1 { 0 } else { grid.margin },
             order,
+            shares,
+            corners,
             next: 0,
             cap,
         })
@@ -244,24 +273,27 @@ impl Tiles {
         self.next
     }
 
+    /// FAST corners per tile, grid order ([`super::corners`]): counted now
+    /// unless the tile order already did.
+    pub fn corners(&mut self) -> Result<Vec<f32>, FeatureError> {
+        if self.corners.is_none() {
+            self.corners = Some(self.frame.corners_per_core(&self.cores)?);
+        }
+        Ok(self.corners.clone().unwrap_or_default())
+    }
+
     /// The share of the image's keypoints extracted so far, as expected
-    /// before they are counted: a tile's share of the frame's area (of what
-    /// the coarse pass leaves, [`TileGrid::COARSE_SHARE`], after one).
+    /// before they are counted: each tile's share of the frame's area, or of
+    /// its corners when the tiles are ordered by them (of what the coarse
+    /// pass leaves, [`TileGrid::COARSE_SHARE`], after one).
     pub fn area_extracted(&self) -> f64 {
-        let (w, h) = self.frame.size();
-        let all = (w as f64 * h as f64).max(1.0);
-        let coarse = self.order.first() == Some(&Unit::Coarse);
-        let fine = if coarse {
-            1.0 - TileGrid::COARSE_SHARE
-        } else {
-            1.0
+        let unit = |u: &Unit| match *u {
+            Unit::Coarse => 0,
+            Unit::Tile(i) => i + usize::from(self.order.first() == Some(&Unit::Coarse)),
         };
         self.order[..self.next]
             .iter()
-            .map(|u| match *u {
-                Unit::Coarse => TileGrid::COARSE_SHARE,
-                Unit::Tile(i) => fine * self.cores[i].2 as f64 * self.cores[i].3 as f64 / all,
-            })
+            .map(|u| self.shares[unit(u)])
             .sum::<f64>()
     }
 

@@ -3,7 +3,8 @@
 //! and each batch runs permute → quantize → vote → stop; the answer is ranked
 //! at the end:
 //!
-//! - [`permute`]: a seeded random order of each batch's features;
+//! - [`permute`]: a seeded random order of each batch's features (and the
+//!   order of the tiles: richest first, or at random);
 //! - quantize: blocks of `block` features at a time through a caller's
 //!   quantizer (a [`Quantizer`], or known words);
 //! - [`vote`]: one feature at a time into the histogram;
@@ -27,6 +28,7 @@ pub mod stop;
 pub mod trace;
 pub mod vote;
 
+pub use permute::TileOrder;
 pub use prior::{Posterior, Prior};
 pub use rank::Ranked;
 pub use stop::{LeaderCheck, RuleSpec, StopRule};
@@ -69,6 +71,8 @@ pub struct SearchOptions {
     /// Images on each side, along the map's order, that count as one place
     /// when a candidate's distinctness is measured ([`Ranked::distinct`]).
     pub place_window: u32,
+    /// The order a query's tiles are extracted in.
+    pub tile_order: TileOrder,
 }
 
 impl Default for SearchOptions {
@@ -84,6 +88,7 @@ impl Default for SearchOptions {
             prior: None,
             hamming: Some(HammingWeights::DEFAULT),
             place_window: Self::PLACE_WINDOW,
+            tile_order: TileOrder::default(),
         }
     }
 }

@@ -1,5 +1,8 @@
-//! The random order features are streamed in: a Fisher–Yates shuffle driven by
-//! ChaCha8, so a seed gives the same order on every platform.
+//! The order features and tiles are streamed in. Features: a Fisher–Yates
+//! shuffle driven by ChaCha8, so a seed gives the same order on every
+//! platform. Tiles ([`TileOrder`]): richest first, by a count of corners
+//! taken before extraction, or at random; and, for the feature-count
+//! estimate, the share of the image's keypoints each tile is expected to hold.
 
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -16,20 +19,87 @@ pub fn permutation(n: usize, seed: u64) -> Vec<u32> {
 /// the features inside the first tile are not drawn from the same stream.
 const TILE_ORDER_SALT: u64 = 0x7469_6c65_6f72_6465;
 
-/// The order in which an image's `n` extraction units are extracted,
-/// determined by the search's seed: the tiles in a random order, after the
-/// coarse pass (unit 0) when there is one.
-pub fn tile_order(n: usize, coarse_first: bool, seed: u64) -> Vec<u32> {
-    match coarse_first {
-        true if n > 0 => std::iter::once(0)
-            .chain(
-                permutation(n - 1, seed ^ TILE_ORDER_SALT)
-                    .into_iter()
-                    .map(|t| t + 1),
-            )
-            .collect(),
-        _ => permutation(n, seed ^ TILE_ORDER_SALT),
+/// In which order a query's tiles are extracted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TileOrder {
+    /// Most corners first (FAST corners counted on the half-size frame before
+    /// any tile is extracted); ties in a random order from the seed. The
+    /// tiles richest in keypoints come first, so a search that stops early
+    /// has seen more features for its time (docs/results.md, "Tile order").
+    #[default]
+    Richest,
+    /// A random order drawn from the search's seed.
+    Random,
+}
+
+impl TileOrder {
+    pub const NAMES: [&'static str; 2] = ["richest", "random"];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            TileOrder::Richest => "richest",
+            TileOrder::Random => "random",
+        }
     }
+}
+
+impl std::str::FromStr for TileOrder {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "richest" => Ok(TileOrder::Richest),
+            "random" => Ok(TileOrder::Random),
+            _ => Err(format!(
+                "unknown tile order {s:?}; expected one of {}",
+                Self::NAMES.join(", ")
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for TileOrder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The order in which an image's `n` extraction units are extracted: the
+/// coarse pass (unit 0) first when there is one, then the tiles in a random
+/// order drawn from the search's seed, sorted by `corners` (one count per
+/// tile, grid order; most first) when given.
+pub fn tile_order(n: usize, coarse_first: bool, seed: u64, corners: Option<&[f32]>) -> Vec<u32> {
+    let coarse = usize::from(coarse_first && n > 0);
+    let mut tiles = permutation(n - coarse, seed ^ TILE_ORDER_SALT);
+    if let Some(corners) = corners.filter(|c| c.len() == tiles.len()) {
+        // stable: equal counts keep the random order
+        let count = |t: u32| corners[t as usize].max(0.0);
+        tiles.sort_by(|&a, &b| count(b).total_cmp(&count(a)));
+    }
+    (0..coarse as u32)
+        .chain(tiles.into_iter().map(|t| t + coarse as u32))
+        .collect()
+}
+
+/// The share of the image's keypoints each unit is expected to hold, before
+/// they are counted: `area` gives each unit's share by area (the coarse
+/// pass's assumed share first, when `coarse_first`); with `corners` (one count
+/// per tile, grid order) the tiles' part is shared out by their corners
+/// instead, when they counted any.
+pub fn expected_shares(area: &[f64], coarse_first: bool, corners: Option<&[f32]>) -> Vec<f64> {
+    let coarse = usize::from(coarse_first && !area.is_empty());
+    let mut shares = area.to_vec();
+    let tiles = &mut shares[coarse..];
+    if let Some(corners) = corners.filter(|c| c.len() == tiles.len()) {
+        let total: f64 = corners.iter().map(|&c| c.max(0.0) as f64).sum();
+        let fine: f64 = tiles.iter().sum();
+        if total > 0.0 {
+            for (s, &c) in tiles.iter_mut().zip(corners) {
+                *s = fine * c.max(0.0) as f64 / total;
+            }
+        }
+    }
+    shares
 }
 
 #[cfg(test)]
@@ -49,10 +119,48 @@ mod tests {
 
     #[test]
     fn a_coarse_pass_comes_first() {
-        let fine = tile_order(4, false, 9);
-        let coarse = tile_order(5, true, 9);
+        let fine = tile_order(4, false, 9, None);
+        let coarse = tile_order(5, true, 9, None);
         assert_eq!(coarse[0], 0);
         let shifted: Vec<u32> = fine.iter().map(|t| t + 1).collect();
         assert_eq!(coarse[1..], shifted[..]);
+    }
+
+    #[test]
+    fn the_richest_tiles_come_first_ties_at_random() {
+        let corners = [3.0, 40.0, 3.0, 12.0];
+        for seed in 0..20 {
+            let order = tile_order(4, false, seed, Some(&corners));
+            assert_eq!(order[..2], [1, 3]);
+            let mut rest = order[2..].to_vec();
+            rest.sort_unstable();
+            assert_eq!(rest, [0, 2]);
+            // after a coarse pass, the same tiles shifted by one
+            let coarse = tile_order(5, true, seed, Some(&corners));
+            assert_eq!(coarse[..3], [0, 2, 4]);
+        }
+        // ties: both orders of tiles 0 and 2 occur
+        let firsts: std::collections::HashSet<u32> = (0..40)
+            .map(|seed| tile_order(4, false, seed, Some(&corners))[2])
+            .collect();
+        assert_eq!(firsts.len(), 2);
+        // a count of the wrong length is ignored
+        assert_eq!(
+            tile_order(4, false, 9, Some(&[1.0])),
+            tile_order(4, false, 9, None)
+        );
+    }
+
+    #[test]
+    fn shares_follow_the_corners_and_keep_their_total() {
+        let area = [0.3, 0.175, 0.175, 0.175, 0.175];
+        let shares = expected_shares(&area, true, Some(&[1.0, 0.0, 2.0, 1.0]));
+        let want = [0.3, 0.175, 0.0, 0.35, 0.175];
+        for (s, w) in shares.iter().zip(want) {
+            assert!((s - w).abs() < 1e-12, "{shares:?}");
+        }
+        // no corners anywhere, or none asked: by area
+        assert_eq!(expected_shares(&area, true, Some(&[0.0; 4])), area);
+        assert_eq!(expected_shares(&area[1..], false, None), area[1..]);
     }
 }

@@ -228,6 +228,9 @@ pub struct SearchDefaults {
     /// a `,coarse` suffix extracts the whole image at half size first; an
     /// `,auto` suffix learns for the map whether to ([`crate::features::CoarseChoice`]).
     pub tiles: String,
+    /// The order tiles are extracted in: `richest` (most FAST corners first)
+    /// or `random`.
+    pub tile_order: crate::search::TileOrder,
     /// Weigh votes by the features' Hamming signatures (false: plain tf-idf).
     pub hamming: bool,
     /// Images on each side, along the map's order, that count as one place
@@ -314,6 +317,7 @@ impl Default for SearchDefaults {
                 learn_coarse: true,
             }
             .to_string(),
+            tile_order: o.tile_order,
             hamming: o.hamming.is_some(),
             place_window: o.place_window,
         }

@@ -66,6 +66,10 @@ pub struct LocalizeParams {
     /// Default: the configured grid.
     #[param(value_type = Option<String>, example = "2x2+24")]
     pub tiles: Option<String>,
+    /// The order the tiles are extracted in: `richest` (most FAST corners
+    /// first) or `random` (drawn from the seed). Default: the configured order.
+    #[param(value_type = Option<String>, example = "richest")]
+    pub tile_order: Option<String>,
     /// Verify the top vote candidates geometrically and re-rank them by
     /// inliers (`true` or `false`; default from the `[verify]` section).
     /// With verification the score is the inlier count.
@@ -163,6 +167,12 @@ impl LocalizeParams {
             Some(v) => whole("seed", v, i64::MAX as u64)?,
             None => crate::report::draw_seed(),
         };
+        if let Some(v) = &self.tile_order {
+            o.tile_order = v
+                .trim()
+                .parse()
+                .map_err(|e: String| ApiError::invalid_parameter("tile_order", e))?;
+        }
         if let Some(v) = &self.min_score {
             let s = number("min_score", v)?;
             if !(0.0..=f32::MAX as f64).contains(&s) {

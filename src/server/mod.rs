@@ -98,6 +98,7 @@ impl AppState {
                 prior: None,
                 hamming: s.hamming.then_some(crate::search::HammingWeights::DEFAULT),
                 place_window: s.place_window,
+                tile_order: s.tile_order,
             },
             max_top_n: config.limits.max_top_n,
         };

@@ -37,6 +37,7 @@ impl From<&Localization> for pb::Localization {
                 extracted: a.tiles.extracted as u32,
                 total: a.tiles.total as u32,
                 grid: a.tiles.grid.to_string(),
+                order: a.tiles.order.to_string(),
             }),
             rule: Some(pb::Rule {
                 name: a.rule.name.clone(),

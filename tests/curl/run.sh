@@ -192,13 +192,16 @@ check "rule verified answers with inlier counts ($(jq -c '{tiles, stop: .stop.de
   and .tiles.extracted <= .tiles.total and .features.extracted >= .features.used' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=3x2%2B16&seed=3")
 check "tiles=3x2+16: the full search extracts all 6 tiles" jqt --arg s "$status" '
-  $s == "200" and .tiles == {"extracted": 6, "total": 6, "grid": "3x2+16"}
+  $s == "200" and .tiles == {"extracted": 6, "total": 6, "grid": "3x2+16", "order": "richest"}
   and .features.extracted == .features.total and .features.used == .features.total' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&seed=3")
 check "rule=none without tiles= extracts the image whole" jqt --arg s "$status" '
-  $s == "200" and .tiles == {"extracted": 1, "total": 1, "grid": "1x1+0"}
+  $s == "200" and .tiles == {"extracted": 1, "total": 1, "grid": "1x1+0", "order": "richest"}
   and .features.used == .features.total' "$B"
-for bad in "tiles=0x2" "rule=none&threshold=2" "rule=peak-mean&inliers=12" "rule=verified&inliers=3"; do
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=2x2%2B24&tile_order=random&seed=3")
+check "tile_order=random is reported and extracts every tile" jqt --arg s "$status" '
+  $s == "200" and .tiles == {"extracted": 4, "total": 4, "grid": "2x2+24", "order": "random"}' "$B"
+for bad in "tiles=0x2" "tile_order=sideways" "rule=none&threshold=2" "rule=peak-mean&inliers=12" "rule=verified&inliers=3"; do
   status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?$bad")
   check "$bad is 400 invalid_parameter ($(jq -r .error.message "$B"))" \
     test "$status/$(jq -r .error.code "$B")" = "400/invalid_parameter"
