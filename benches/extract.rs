@@ -9,10 +9,15 @@
 //! the extracting thread's CPU time. For each plan: the full extraction's
 //! cost and keypoints against the whole image's, and what the first unit
 //! (the coarse pass, or one tile) costs and finds.
+//!
+//! Last, what ordering the tiles costs: preparing a `2x2+24` image for
+//! streaming (downscaling) in the random tile order, and in the richest-first
+//! order, which also counts FAST corners per tile.
 
 use bowloc::dataset::Dataset;
-use bowloc::features::{self, DecodeLimits, ExtractConfig, TileGrid};
+use bowloc::features::{self, DecodeLimits, ExtractConfig, TileGrid, Tiles};
 use bowloc::pipeline::extract_tiled;
+use bowloc::search::TileOrder;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -171,6 +176,16 @@ fn extract(c: &mut Criterion) {
         let cfg = config(side);
         group.bench_with_input(BenchmarkId::new("max_side", side), &side, |b, _| {
             b.iter(|| extract_ms(&images[0], &cfg))
+        });
+    }
+    group.finish();
+    let decoded = features::decode(&images[0], DecodeLimits::default()).unwrap();
+    let cfg = config(640);
+    let mut group = c.benchmark_group("tile-order/gardens-point");
+    group.sample_size(20);
+    for order in [TileOrder::Random, TileOrder::Richest] {
+        group.bench_with_input(BenchmarkId::new("prepare", order), &order, |b, &order| {
+            b.iter(|| Tiles::new(&decoded, &cfg, TileGrid::DEFAULT, Some((order, 1))).unwrap())
         });
     }
     group.finish();

@@ -1,12 +1,18 @@
 //! Does assigning each query feature to more than one word help? For one
-//! vocabulary seed, recall@1 / recall@5 on whole queries at 25, 50, 75 and
-//! 100 % of each query's features, with each feature voting for its nearest
-//! word only, or also for its next nearest words whose squared distance is
-//! within a ratio of the nearest's (multiple assignment, Jégou et al. 2010).
+//! vocabulary seed, recall@1 / recall@5 at 25, 50, 75 and 100 % of each
+//! query's features, with each feature voting for its nearest word only, or
+//! also for its next nearest words (those whose squared distance is within a
+//! ratio of the nearest's, or all of them): multiple assignment, Jégou et
+//! al. 2010, each assignment signed for its own word. The fraction is of
+//! the features in a random order on whole queries, or, with `tiles`, of a
+//! `2x2+24` query's whole tiles in a random order, as the service streams
+//! them (docs/results.md, "More words per feature").
 //!
 //! ```sh
-//! cargo run --release --example assign -- ../shared/datasets/gardens-point 5000 1
+//! cargo run --release --example assign -- ../shared/datasets/gardens-point 5000 1 [tiles]
 //! ```
+//!
+//! It reads (or fills) the eval's caches in `data/eval-cache/<dataset>`.
 
 use bowloc::dataset::Dataset;
 use bowloc::eval::cache;

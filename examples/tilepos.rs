@@ -1,10 +1,24 @@
-//! Which tiles of a query carry its place? For each subset of a `2x2+24`
-//! query's tiles, the full search's recall@1 / recall@5 on those tiles'
-//! features alone (one vocabulary seed).
+//! Which tiles of a query carry its place, and which order finds them? For
+//! one vocabulary seed, the full search on the features of some of a
+//! `2x2+24` query's tiles: recall@1 / recall@5, and the share of the query's
+//! features and of its tiles' extraction time (CPU time per tile, as the
+//! eval cache timed it) those tiles hold. Printed for every subset of tiles
+//! (bit i = tile i, grid order), then for the first k tiles of four orders:
+//!
+//! - `at random`: the mean over every subset of k tiles (what a random order
+//!   gives on average);
+//! - `most features`: the k tiles with most SIFT features (known only after
+//!   extracting them: the best a guess can do);
+//! - `most corners`: the k tiles with most FAST corners on the half-size
+//!   frame, counted before extraction (`search.tile_order = "richest"`);
+//! - `most |Laplacian|`: the k tiles with the largest summed |Laplacian| of
+//!   the quarter-size frame, another cheap guess.
 //!
 //! ```sh
 //! cargo run --release --example tilepos -- ../shared/datasets/gardens-point 5000 1
 //! ```
+//!
+//! It reads (or fills) the eval's caches in `data/eval-cache/<dataset>`.
 
 use bowloc::dataset::Dataset;
 use bowloc::eval::cache;
@@ -12,81 +26,71 @@ use bowloc::features::{ExtractConfig, TileGrid};
 use bowloc::pipeline::code;
 use bowloc::search::{KnownFeatures, RuleSpec, SearchOptions, search_words};
 use bowloc::vocabulary::kmeans::KmeansConfig;
-use opencv::core::{Mat, Rect, Size, Vector};
+use opencv::core::{Mat, Rect, Size};
 use opencv::prelude::*;
 use rayon::prelude::*;
+use std::path::{Path, PathBuf};
 
-/// Per tile core (grid order), two cheap guesses of its SIFT richness: mean
-/// |Laplacian| of the quarter-size frame, and FAST corners of the half-size one.
-fn guesses(path: &std::path::Path, grid: TileGrid) -> (Vec<f64>, Vec<f64>) {
-    let img =
-        opencv::imgcodecs::imread(path.to_str().unwrap(), opencv::imgcodecs::IMREAD_GRAYSCALE)
-            .unwrap();
+/// Per tile core of `grid` (grid order): the summed |Laplacian| of the image
+/// at a quarter of the extraction frame's size.
+fn laplacian_per_tile(path: &Path, config: &ExtractConfig, grid: TileGrid) -> Vec<f64> {
+    let read =
+        |p: &Path| opencv::imgcodecs::imread(p.to_str()?, opencv::imgcodecs::IMREAD_GRAYSCALE).ok();
+    let Some(img) = read(path) else {
+        return Vec::new();
+    };
     let (w0, h0) = (img.cols() as f64, img.rows() as f64);
-    let s = (640.0 / w0.max(h0)).min(1.0);
+    let s = (config.max_side as f64 / w0.max(h0)).min(1.0);
     let (w, h) = ((w0 * s).round() as i32, (h0 * s).round() as i32);
-    let cores = grid.cores(w as u32, h as u32);
-    let mut lap = Vec::new();
-    let mut fast = Vec::new();
-    for (f, out) in [(4, &mut lap), (2, &mut fast)] {
-        let mut small = Mat::default();
-        opencv::imgproc::resize(
-            &img,
-            &mut small,
-            Size::new(w / f, h / f),
+    let mut small = Mat::default();
+    let mut lap = Mat::default();
+    let mut abs = Mat::default();
+    let quarter = Size::new((w / 4).max(1), (h / 4).max(1));
+    let ok = opencv::imgproc::resize(
+        &img,
+        &mut small,
+        quarter,
+        0.0,
+        0.0,
+        opencv::imgproc::INTER_AREA,
+    )
+    .and_then(|_| {
+        opencv::imgproc::laplacian(
+            &small,
+            &mut lap,
+            opencv::core::CV_32F,
+            3,
+            1.0,
             0.0,
-            0.0,
-            opencv::imgproc::INTER_AREA,
+            opencv::core::BORDER_REFLECT,
         )
-        .unwrap();
-        if f == 4 {
-            let mut l = Mat::default();
-            opencv::imgproc::laplacian(
-                &small,
-                &mut l,
-                opencv::core::CV_32F,
-                3,
-                1.0,
-                0.0,
-                opencv::core::BORDER_REFLECT,
-            )
-            .unwrap();
-            let mut a = Mat::default();
-            opencv::core::absdiff(&l, &opencv::core::Scalar::all(0.0), &mut a).unwrap();
-            for &(x, y, cw, ch) in &cores {
-                let r = Rect::new(
-                    x as i32 / f,
-                    y as i32 / f,
-                    (cw as i32 / f).max(1),
-                    (ch as i32 / f).max(1),
-                );
-                let roi = Mat::roi(&a, r).unwrap();
-                out.push(
-                    opencv::core::mean(&roi, &opencv::core::no_array()).unwrap()[0]
-                        * (cw * ch) as f64,
-                );
-            }
-        } else {
-            let mut kps = Vector::<opencv::core::KeyPoint>::new();
-            opencv::features2d::fast(&small, &mut kps, 20, true).unwrap();
-            for &(x, y, cw, ch) in &cores {
-                let n = kps
-                    .iter()
-                    .filter(|k| {
-                        let (px, py) = (k.pt().x * f as f32, k.pt().y * f as f32);
-                        px >= x as f32
-                            && px < (x + cw) as f32
-                            && py >= y as f32
-                            && py < (y + ch) as f32
-                    })
-                    .count();
-                out.push(n as f64);
-            }
-        }
+    })
+    .and_then(|_| opencv::core::absdiff(&lap, &opencv::core::Scalar::all(0.0), &mut abs));
+    if ok.is_err() {
+        return Vec::new();
     }
-    (lap, fast)
+    grid.cores(w as u32, h as u32)
+        .iter()
+        .map(|&(x, y, cw, ch)| {
+            let r = Rect::new(
+                x as i32 / 4,
+                y as i32 / 4,
+                (cw as i32 / 4).max(1),
+                (ch as i32 / 4).max(1),
+            );
+            Mat::roi(&abs, r)
+                .and_then(|roi| opencv::core::sum_elems(&roi))
+                .map_or(0.0, |s| s[0])
+        })
+        .collect()
 }
-use std::path::PathBuf;
+
+/// The mask of the `k` tiles with the largest `score` (ties in grid order).
+fn top(score: &[f64], k: usize) -> u32 {
+    let mut by: Vec<usize> = (0..score.len()).collect();
+    by.sort_by(|&a, &b| score[b].total_cmp(&score[a]));
+    by.iter().take(k).fold(0, |m, &i| m | (1 << i))
+}
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -98,8 +102,9 @@ fn main() -> anyhow::Result<()> {
     let seed: u64 = args.get(3).map_or(Ok(1), |s| s.parse())?;
     let dataset = Dataset::open(&root)?;
     let dir = PathBuf::from("data/eval-cache").join(&dataset.name);
+    let config = ExtractConfig::default();
     let (map_desc, queries) =
-        cache::dataset_descriptors(&dir, &dataset, &ExtractConfig::default(), TileGrid::DEFAULT)?;
+        cache::dataset_descriptors(&dir, &dataset, &config, TileGrid::DEFAULT)?;
     let kmeans = KmeansConfig {
         k: words,
         seed,
@@ -111,79 +116,32 @@ fn main() -> anyhow::Result<()> {
         .into_par_iter()
         .map(|q| queries.image(q).map(|d| code(&vocab, d)))
         .collect();
-    let tiles = queries.meta().tiles[0].len();
-    let guessed: Vec<(Vec<f64>, Vec<f64>)> = (0..queries.len())
+    let tiles_of = |q: usize| &queries.meta().tiles[q];
+    let tiles = tiles_of(0).len();
+    let laplacian: Vec<Vec<f64>> = (0..queries.len())
         .into_par_iter()
-        .map(|q| guesses(&dataset.queries[q].path, TileGrid::DEFAULT))
+        .map(|q| laplacian_per_tile(&dataset.queries[q].path, &config, TileGrid::DEFAULT))
         .collect();
-    let by_guess = |q: usize, k: usize, which: usize| -> u32 {
-        let g = if which == 0 {
-            &guessed[q].0
-        } else {
-            &guessed[q].1
-        };
-        let mut by: Vec<usize> = (0..g.len()).collect();
-        by.sort_by(|&a, &b| g[b].total_cmp(&g[a]));
-        by[..k].iter().fold(0, |m, &i| m | (1 << i))
-    };
-    println!(
-        "{}: K = {words}, seed {seed}; tiles kept (bit i = tile i, grid order): recall@1 / recall@5, share of features",
-        dataset.name
-    );
-    // per query, the mask of its k richest tiles (most features), k = 1..tiles
-    let richest = |q: usize, k: usize| -> u32 {
-        let t = &queries.meta().tiles[q];
-        let mut by: Vec<usize> = (0..t.len()).collect();
-        by.sort_by_key(|&i| std::cmp::Reverse(t[i].features));
-        by[..k].iter().fold(0, |m, &i| m | (1 << i))
-    };
-    let masks: Vec<(String, Box<dyn Fn(usize) -> u32 + Sync>)> = (1u32..(1 << tiles))
-        .map(|m| {
-            (
-                format!("{m:0w$b}", w = tiles),
-                Box::new(move |_| m) as Box<dyn Fn(usize) -> u32 + Sync>,
-            )
-        })
-        .chain((1..=tiles).map(|k| {
-            (
-                format!("{k} richest"),
-                Box::new(move |q| richest(q, k)) as Box<dyn Fn(usize) -> u32 + Sync>,
-            )
-        }))
-        .chain((1..=tiles).map(|k| {
-            (
-                format!("{k} by |Laplacian|"),
-                Box::new(move |q| by_guess(q, k, 0)) as Box<dyn Fn(usize) -> u32 + Sync>,
-            )
-        }))
-        .chain((1..=tiles).map(|k| {
-            (
-                format!("{k} by FAST"),
-                Box::new(move |q| by_guess(q, k, 1)) as Box<dyn Fn(usize) -> u32 + Sync>,
-            )
-        }))
+    let with_match: Vec<usize> = (0..coded.len())
+        .filter(|&q| !dataset.truth[q].is_empty())
         .collect();
-    for (name, mask_of) in &masks {
-        let hits: Vec<(bool, bool, f64, f64)> = (0..coded.len())
-            .into_par_iter()
-            .filter(|&q| !dataset.truth[q].is_empty())
-            .map(|q| {
-                let Some(c) = &coded[q] else {
-                    return (false, false, 0.0, 0.0);
-                };
-                let mask = mask_of(q);
-                let mut at = 0usize;
-                let (mut ms, mut all_ms) = (0.0f64, 0.0f64);
+    // (recall@1, recall@5, share of features, share of tile time) over the
+    // queries, keeping the tiles `mask(q)` of each query q
+    let measure = |mask: &(dyn Fn(usize) -> u32 + Sync)| -> [f64; 4] {
+        let rows: Vec<[f64; 4]> = with_match
+            .par_iter()
+            .map(|&q| {
+                let Some(c) = &coded[q] else { return [0.0; 4] };
+                let m = mask(q);
                 let (mut w, mut s) = (Vec::new(), Vec::new());
-                for (t, tile) in queries.meta().tiles[q].iter().enumerate() {
+                let (mut at, mut ms, mut all_ms) = (0usize, 0.0, 0.0);
+                for (t, tile) in tiles_of(q).iter().enumerate() {
                     let n = tile.features as usize;
                     all_ms += tile.ms as f64;
-                    if mask & (1 << t) != 0 {
-                        ms += tile.ms as f64;
-                    }
-                    if mask & (1 << t) != 0 {
+                    if m & (1 << t) != 0 {
                         w.extend_from_slice(&c.words[at..at + n]);
                         s.extend_from_slice(&c.signatures[at..at + n]);
+                        ms += tile.ms as f64;
                     }
                     at += n;
                 }
@@ -201,26 +159,69 @@ fn main() -> anyhow::Result<()> {
                     &options,
                 );
                 let hit = |n: usize| {
-                    o.candidates
+                    let found = o
+                        .candidates
                         .iter()
                         .take(n)
-                        .any(|c| dataset.truth[q].contains(&c.id))
+                        .any(|c| dataset.truth[q].contains(&c.id));
+                    if found { 1.0 } else { 0.0 }
                 };
-                (
+                [
                     hit(1),
                     hit(5),
                     w.len() as f64 / c.words.len().max(1) as f64,
-                    ms / all_ms.max(1e-9),
-                )
+                    ms / f64::max(all_ms, 1e-9),
+                ]
             })
             .collect();
-        let n = hits.len().max(1) as f64;
+        let n = rows.len().max(1) as f64;
+        std::array::from_fn(|i| rows.iter().map(|r| r[i]).sum::<f64>() / n)
+    };
+    let line = |name: &str, r: [f64; 4]| {
         println!(
-            "{name}: {:.1} / {:.1}  ({:.2} of the features, {:.2} of the tiles' time)",
-            100.0 * hits.iter().filter(|h| h.0).count() as f64 / n,
-            100.0 * hits.iter().filter(|h| h.1).count() as f64 / n,
-            hits.iter().map(|h| h.2).sum::<f64>() / n,
-            hits.iter().map(|h| h.3).sum::<f64>() / n,
+            "{name:<20} recall@1 {:5.1} / recall@5 {:5.1}   {:.2} of the features, {:.2} of the tiles' time",
+            100.0 * r[0],
+            100.0 * r[1],
+            r[2],
+            r[3]
+        )
+    };
+    println!(
+        "{}: K = {words}, vocabulary seed {seed}, {} queries; the full search on some of each query's `{}` tiles",
+        dataset.name,
+        with_match.len(),
+        TileGrid::DEFAULT
+    );
+    let subsets: Vec<(u32, [f64; 4])> = (1u32..(1 << tiles))
+        .map(|m| (m, measure(&move |_| m)))
+        .collect();
+    for (m, r) in &subsets {
+        line(&format!("tiles {m:0w$b}", w = tiles), *r);
+    }
+    for k in 1..=tiles {
+        let of_k: Vec<&[f64; 4]> = subsets
+            .iter()
+            .filter(|(m, _)| m.count_ones() as usize == k)
+            .map(|(_, r)| r)
+            .collect();
+        let mean =
+            std::array::from_fn(|i| of_k.iter().map(|r| r[i]).sum::<f64>() / of_k.len() as f64);
+        line(&format!("{k} at random"), mean);
+        let features =
+            |q: usize| -> Vec<f64> { tiles_of(q).iter().map(|t| t.features as f64).collect() };
+        line(
+            &format!("{k} most features"),
+            measure(&|q| top(&features(q), k)),
+        );
+        let corners =
+            |q: usize| -> Vec<f64> { tiles_of(q).iter().map(|t| t.corners as f64).collect() };
+        line(
+            &format!("{k} most corners"),
+            measure(&|q| top(&corners(q), k)),
+        );
+        line(
+            &format!("{k} most |Laplacian|"),
+            measure(&|q| top(&laplacian[q], k)),
         );
     }
     Ok(())

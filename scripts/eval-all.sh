@@ -9,7 +9,10 @@
 # docs/results/<dataset>/ (results.json, with every query's answers, stays in
 # data/eval: it is large). docs/results.md pastes each results.md unchanged.
 #
-#   scripts/eval-all.sh [--keep-cache]
+#   [EVAL_ARGS="--tile-order random"] scripts/eval-all.sh [--keep-cache]
+#
+# EVAL_ARGS: more `bowloc eval` options for both datasets (docs/results.md's
+# dataset sections were made with `--tile-order random`).
 #
 # Every figure depends on the CPU (SIFT's output follows its instruction
 # set): each results.md names the CPU, OpenCV's SIMD level and the
@@ -37,7 +40,7 @@ for run in gardens-point:5000 rtabmap-loop:1000; do
   fi
   /usr/bin/time -f "$name: wall %e s" \
     nice $B eval --dataset "$D/$name" --words "$words" --runs 3 --vocab-seeds 3 \
-      --verify "${sets[@]}" --out "$out"
+      --verify "${sets[@]}" ${EVAL_ARGS:-} --out "$out"
   mkdir -p "docs/results/$name"
   rm -f "docs/results/$name"/*
   cp "$out"/results.md "$out"/*.csv "$out"/*.png "$out"/*.svg "docs/results/$name/"

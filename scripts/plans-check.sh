@@ -11,7 +11,8 @@
 #
 # The environment changes what is compared: SETTINGS (RULE=VALUE@WARMUP
 # settings besides the full search; default "peak-mean=1.6@20 verified=8"),
-# VERIFY (yes or no; default yes), PLANS (default "2x2+24 2x2+24,coarse")
+# VERIFY (yes or no; default yes), PLANS (default "2x2+24 2x2+24,coarse"),
+# ORDERS (tile orders, default "richest"; "richest random" compares them)
 # and DATASETS (NAME:WORDS, default "rtabmap-loop:1000 gardens-point:5000").
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -25,11 +26,12 @@ for dataset in ${DATASETS:-rtabmap-loop:1000 gardens-point:5000}; do
   name=${dataset%%:*}
   words=${dataset##*:}
   for plan in ${PLANS:-2x2+24 2x2+24,coarse}; do
-    dir="$out/$name-$plan"
+  for order in ${ORDERS:-richest}; do
+    dir="$out/$name-$plan-$order"
     ./target/release/bowloc --log warn eval --dataset "../shared/datasets/$name" --words "$words" \
-      --runs 3 --vocab-seeds 3 --rules none --tiles "$plan" "${verify[@]}" \
+      --runs 3 --vocab-seeds 3 --rules none --tiles "$plan" --tile-order "$order" "${verify[@]}" \
       "${settings[@]}" --no-plots --out "$dir" >/dev/null
-    python3 - "$dir/results.csv" "$name" "$plan" <<'PY'
+    python3 - "$dir/results.csv" "$name" "$plan $order" <<'PY'
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
 seen = set()
@@ -42,11 +44,12 @@ for r in rows:
     if r["min_features"] != "0":
         label += f" w={r['min_features']}"
     pct = lambda k: 100 * float(r[k])
-    print(f"{sys.argv[2]:14} {sys.argv[3]:15} {label:20} recall@1 {pct('recall1_mean'):.1f} "
+    print(f"{sys.argv[2]:14} {sys.argv[3]:23} {label:20} recall@1 {pct('recall1_mean'):.1f} "
           f"(worst {pct('recall1_worst'):.1f}), recall@5 {pct('recall5_mean'):.1f}, "
           f"top-1 @90%P by distinctness {pct('recall90_top1_distinct_mean'):.1f}, "
           f"features {pct('fraction_mean'):.1f} %, x whole-image full search "
           f"{float(r['time_share_whole_full_mean']):.3f} / {float(r['time_share_whole_full_median']):.3f}")
 PY
+  done
   done
 done
