@@ -14,45 +14,32 @@
 //!
 //! It reads (or fills) the eval's caches in `data/eval-cache/<dataset>`.
 
-use bowloc::dataset::Dataset;
 use bowloc::eval::cache;
-use bowloc::features::{ExtractConfig, TileGrid};
+use bowloc::features::TileGrid;
 use bowloc::search::{KnownFeatures, RuleSpec, SearchOptions, search_words};
-use bowloc::vocabulary::kmeans::KmeansConfig;
 use ndarray::{Array2, Axis};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rayon::prelude::*;
-use std::path::PathBuf;
 
 const RUNS: u64 = 3;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let root = PathBuf::from(
-        args.get(1)
-            .map_or("../shared/datasets/gardens-point", |s| s),
-    );
-    let words: usize = args.get(2).map_or(Ok(5000), |s| s.parse())?;
-    let seed: u64 = args.get(3).map_or(Ok(1), |s| s.parse())?;
     let tiled = args.get(4).is_some_and(|s| s == "tiles");
     let grid = if tiled {
         TileGrid::DEFAULT
     } else {
         TileGrid::WHOLE
     };
-    let dataset = Dataset::open(&root)?;
-    let dir = PathBuf::from("data/eval-cache").join(&dataset.name);
-    std::fs::create_dir_all(&dir)?;
-    let (map_desc, queries) =
-        cache::dataset_descriptors(&dir, &dataset, &ExtractConfig::default(), grid)?;
-    let kmeans = KmeansConfig {
-        k: words,
-        seed,
-        ..KmeansConfig::default()
-    };
-    let vocab = cache::vocabulary(&dir, &map_desc, &kmeans)?;
-    let map = cache::map_index(&dir, &vocab, &map_desc, &dataset.name)?;
+    let cache::Prepared {
+        dataset,
+        queries,
+        vocab,
+        map,
+        ..
+    } = cache::prepare_from_args(&args, grid)?;
+    let (words, seed) = (vocab.words(), vocab.meta().seed);
     let centroids = vocab.centroids().to_owned();
     let cnorm: Vec<f32> = centroids.rows().into_iter().map(|r| r.dot(&r)).collect();
     // Per query: for each feature, its 3 nearest words and squared distances.

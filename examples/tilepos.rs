@@ -20,16 +20,14 @@
 //!
 //! It reads (or fills) the eval's caches in `data/eval-cache/<dataset>`.
 
-use bowloc::dataset::Dataset;
 use bowloc::eval::cache;
 use bowloc::features::{ExtractConfig, TileGrid};
 use bowloc::pipeline::code;
 use bowloc::search::{KnownFeatures, RuleSpec, SearchOptions, search_words};
-use bowloc::vocabulary::kmeans::KmeansConfig;
 use opencv::core::{Mat, Rect, Size};
 use opencv::prelude::*;
 use rayon::prelude::*;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Per tile core of `grid` (grid order): the summed |Laplacian| of the image
 /// at a quarter of the extraction frame's size.
@@ -94,24 +92,15 @@ fn top(score: &[f64], k: usize) -> u32 {
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let root = PathBuf::from(
-        args.get(1)
-            .map_or("../shared/datasets/gardens-point", |s| s),
-    );
-    let words: usize = args.get(2).map_or(Ok(5000), |s| s.parse())?;
-    let seed: u64 = args.get(3).map_or(Ok(1), |s| s.parse())?;
-    let dataset = Dataset::open(&root)?;
-    let dir = PathBuf::from("data/eval-cache").join(&dataset.name);
     let config = ExtractConfig::default();
-    let (map_desc, queries) =
-        cache::dataset_descriptors(&dir, &dataset, &config, TileGrid::DEFAULT)?;
-    let kmeans = KmeansConfig {
-        k: words,
-        seed,
-        ..KmeansConfig::default()
-    };
-    let vocab = cache::vocabulary(&dir, &map_desc, &kmeans)?;
-    let map = cache::map_index(&dir, &vocab, &map_desc, &dataset.name)?;
+    let cache::Prepared {
+        dataset,
+        queries,
+        vocab,
+        map,
+        ..
+    } = cache::prepare_from_args(&args, TileGrid::DEFAULT)?;
+    let (words, seed) = (vocab.words(), vocab.meta().seed);
     let coded: Vec<_> = (0..queries.len())
         .into_par_iter()
         .map(|q| queries.image(q).map(|d| code(&vocab, d)))

@@ -326,6 +326,54 @@ pub fn descriptors(
     open(path)
 }
 
+/// A dataset with its descriptors, one vocabulary and the map built with it,
+/// all from (or into) the cache folder `data/eval-cache/<dataset>`: where a
+/// study of one vocabulary (the examples) starts.
+pub struct Prepared {
+    pub dataset: crate::dataset::Dataset,
+    pub map_descriptors: DescriptorSet,
+    /// The queries, tile by tile with the grid asked for.
+    pub queries: DescriptorSet,
+    pub vocab: Vocabulary,
+    pub map: MapIndex,
+}
+
+/// [`Prepared`] for the dataset at `root`, a vocabulary of `words` words
+/// from k-means seed `seed` and the queries cut by `grid`, with the default
+/// extraction.
+pub fn prepare(root: &Path, words: usize, seed: u64, grid: TileGrid) -> anyhow::Result<Prepared> {
+    let dataset = crate::dataset::Dataset::open(root)?;
+    let dir = Path::new("data/eval-cache").join(&dataset.name);
+    std::fs::create_dir_all(&dir)?;
+    let (map_descriptors, queries) =
+        dataset_descriptors(&dir, &dataset, &ExtractConfig::default(), grid)?;
+    let kmeans = KmeansConfig {
+        k: words,
+        seed,
+        ..KmeansConfig::default()
+    };
+    let vocab = vocabulary(&dir, &map_descriptors, &kmeans)?;
+    let map = map_index(&dir, &vocab, &map_descriptors, &dataset.name)?;
+    Ok(Prepared {
+        dataset,
+        map_descriptors,
+        queries,
+        vocab,
+        map,
+    })
+}
+
+/// [`prepare`] from a command line's `[DATASET] [WORDS] [SEED]` (after the
+/// program name; defaults `../shared/datasets/gardens-point`, 5000, 1).
+pub fn prepare_from_args(args: &[String], grid: TileGrid) -> anyhow::Result<Prepared> {
+    let root = args
+        .get(1)
+        .map_or("../shared/datasets/gardens-point", |s| s);
+    let words: usize = args.get(2).map_or(Ok(5000), |s| s.parse())?;
+    let seed: u64 = args.get(3).map_or(Ok(1), |s| s.parse())?;
+    prepare(Path::new(root), words, seed, grid)
+}
+
 /// A vocabulary of `config.k` words trained on `map`'s descriptors, cached in
 /// `dir` under a name holding K, the seed and the descriptors' checksum.
 pub fn vocabulary(
