@@ -17,7 +17,7 @@ use bowloc::search::{SearchOptions, TileOrder};
 /// docs/results.md, "Tile order"). The test asserts a saving of at least
 /// `MIN_SAVING` of the tiles and at most `MAX_LOSS` of recall@1.
 const MIN_SAVING: f64 = 0.05;
-const MAX_LOSS: f64 = 0.01;
+const MAX_LOSS: f64 = 0.02;
 
 #[test]
 fn the_richest_tiles_first_extract_less_for_the_same_answers() {
