@@ -23,7 +23,7 @@
 use bowloc::eval::cache;
 use bowloc::features::{ExtractConfig, TileGrid};
 use bowloc::pipeline::code;
-use bowloc::search::{KnownFeatures, RuleSpec, SearchOptions, search_words};
+use bowloc::search::{KnownFeatures, RuleSpec, SearchOptions, permute, search_words};
 use opencv::core::{Mat, Rect, Size};
 use opencv::prelude::*;
 use rayon::prelude::*;
@@ -213,5 +213,38 @@ fn main() -> anyhow::Result<()> {
             measure(&|q| top(&laplacian[q], k)),
         );
     }
+    // How well the first tile (most corners) estimates the query's feature
+    // count N: features / expected share, the share by corners (the
+    // service's, `permute::expected_shares`), by area, or their mean.
+    let mut errors: [Vec<f64>; 3] = Default::default();
+    for &q in &with_match {
+        let t = tiles_of(q);
+        let n: f64 = t.iter().map(|t| t.features as f64).sum();
+        let corners: Vec<f32> = t.iter().map(|t| t.corners).collect();
+        let area: Vec<f64> = t.iter().map(|t| t.area as f64).collect();
+        let first = top(&corners.iter().map(|&c| c as f64).collect::<Vec<_>>(), 1).trailing_zeros()
+            as usize;
+        let by_corners = permute::expected_shares(&area, false, Some(&corners));
+        for (e, share) in errors.iter_mut().zip([
+            by_corners[first],
+            area[first],
+            (by_corners[first] + area[first]) / 2.0,
+        ]) {
+            if n > 0.0 && share > 0.0 && t[first].features > 0 {
+                e.push((t[first].features as f64 / share / n).ln().abs());
+            }
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    let [a, b, c] = &mut errors;
+    println!(
+        "N estimated from the first tile (most corners): median |ln(estimate / N)| {:.3} by corners, {:.3} by area, {:.3} by their mean",
+        median(a),
+        median(b),
+        median(c)
+    );
     Ok(())
 }
