@@ -11,6 +11,8 @@
 //!   extracting them: the best a guess can do);
 //! - `most corners`: the k tiles with most FAST corners on the half-size
 //!   frame, counted before extraction (`search.tile_order = "richest"`);
+//! - `corners, spread`: the tile with most corners, then each next the one
+//!   farthest from those taken (`search.tile_order = "spread"`);
 //! - `most |Laplacian|`: the k tiles with the largest summed |Laplacian| of
 //!   the quarter-size frame, another cheap guess.
 //!
@@ -23,7 +25,8 @@
 use bowloc::eval::cache;
 use bowloc::features::{ExtractConfig, TileGrid};
 use bowloc::pipeline::code;
-use bowloc::search::{KnownFeatures, RuleSpec, SearchOptions, permute, search_words};
+use bowloc::search::permute::TileGuide;
+use bowloc::search::{KnownFeatures, RuleSpec, SearchOptions, TileOrder, permute, search_words};
 use opencv::core::{Mat, Rect, Size};
 use opencv::prelude::*;
 use rayon::prelude::*;
@@ -202,11 +205,27 @@ fn main() -> anyhow::Result<()> {
             &format!("{k} most features"),
             measure(&|q| top(&features(q), k)),
         );
-        let corners =
-            |q: usize| -> Vec<f64> { tiles_of(q).iter().map(|t| t.corners as f64).collect() };
+        // the service's orders, as `permute::tile_order` draws them
+        let ordered = |q: usize, order: TileOrder| -> u32 {
+            let t = tiles_of(q);
+            let corners: Vec<f32> = t.iter().map(|t| t.corners).collect();
+            let cells: Vec<[u32; 2]> = t.iter().map(|t| t.cell).collect();
+            let guide = TileGuide {
+                corners: &corners,
+                cells: &cells,
+            };
+            permute::tile_order(t.len(), false, q as u64, order, Some(guide))
+                .iter()
+                .take(k)
+                .fold(0, |m, &t| m | (1 << t))
+        };
         line(
             &format!("{k} most corners"),
-            measure(&|q| top(&corners(q), k)),
+            measure(&|q| ordered(q, TileOrder::Richest)),
+        );
+        line(
+            &format!("{k} corners, spread"),
+            measure(&|q| ordered(q, TileOrder::Spread)),
         );
         line(
             &format!("{k} most |Laplacian|"),

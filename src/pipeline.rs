@@ -74,8 +74,10 @@ pub struct TileCost {
     pub area: f64,
     pub extract: Duration,
     /// FAST corners counted in the tile before extraction (0 for a whole
-    /// image), what the `richest` tile order sorts by.
+    /// image), what the tile orders `spread` and `richest` read.
     pub corners: f32,
+    /// Its cell (column, row) in the grid ([0, 0] for the coarse pass).
+    pub cell: [u32; 2],
 }
 
 /// Extract a decoded image tile by tile in grid order, timing each tile by
@@ -91,6 +93,7 @@ pub fn extract_tiled(
         true => tiles.corners()?,
         false => Vec::new(),
     };
+    let cells = tiles.cells();
     let coarse = usize::from(grid.coarse);
     let mut parts = Vec::with_capacity(tiles.total());
     let mut costs = Vec::with_capacity(tiles.total());
@@ -109,6 +112,10 @@ pub fn extract_tiled(
                 .checked_sub(coarse)
                 .and_then(|t| corners.get(t).copied())
                 .unwrap_or(0.0),
+            cell: unit
+                .checked_sub(coarse)
+                .and_then(|t| cells.get(t).copied())
+                .unwrap_or_default(),
         });
         area = share;
         parts.push(tile);

@@ -317,7 +317,7 @@ pub struct TileUse {
     #[serde(serialize_with = "crate::report::display")]
     pub grid: TileGrid,
     /// The order the tiles were extracted in: `richest` (most FAST corners
-    /// first) or `random`.
+    /// first), `spread` or `random`.
     #[schema(value_type = String, example = "richest")]
     #[serde(serialize_with = "crate::report::display")]
     pub order: crate::search::TileOrder,

@@ -113,7 +113,7 @@ pub struct SearchArgs {
     /// Images on each side, along the map's order, that count as one place when a candidate's distinctness is measured.
     #[arg(long, default_value_t = SearchOptions::recommended().place_window, value_parser = place_window)]
     pub place_window: u32,
-    /// The order tiles are extracted in: richest (most FAST corners first) or random.
+    /// The order tiles are extracted in: richest (most FAST corners first), spread (the richest, then the farthest from those taken) or random.
     #[arg(long, default_value_t = SearchOptions::recommended().tile_order)]
     pub tile_order: bowloc::search::TileOrder,
 }

@@ -61,7 +61,8 @@ pub struct EvalArgs {
     #[arg(long, default_value = "2x2+24")]
     tiles: TileGrid,
     /// The order the tiles are replayed in, as the service extracts them:
-    /// richest (most FAST corners first) or random.
+    /// richest (most FAST corners first), spread (the richest, then the
+    /// farthest from those taken) or random.
     #[arg(long, default_value_t = bowloc::search::TileOrder::default())]
     tile_order: bowloc::search::TileOrder,
     /// Images on each side, along the map's order, that count as one place

@@ -28,8 +28,8 @@ use std::path::Path;
 
 const MAGIC: [u8; 8] = *b"BOWLOCDE";
 /// 2: keypoints beside the descriptors; 3: tiles and their times; 4: the
-/// times are thread CPU time; 5: each tile's corner count.
-const VERSION: u32 = 5;
+/// times are thread CPU time; 5: each tile's corner count; 6: its cell.
+const VERSION: u32 = 6;
 /// Descriptor width (SIFT).
 const DIM: usize = 128;
 /// Values per keypoint row: x, y, size, angle, response.
@@ -312,6 +312,7 @@ pub fn descriptors(
                     area: t.area as f32,
                     ms: ms(t.extract) as f32,
                     corners: t.corners,
+                    cell: t.cell,
                 })
                 .collect()
         }));
@@ -470,12 +471,14 @@ mod tests {
                     area: 1.0,
                     ms: 0.5,
                     corners: 0.0,
+                    cell: [0, 0],
                 }],
                 vec![Tile {
                     features: 2,
                     area: 1.0,
                     ms: 0.5,
                     corners: 0.0,
+                    cell: [0, 0],
                 }],
             ],
         };
@@ -537,6 +540,7 @@ mod tests {
                 area: 1.0,
                 ms: 0.5,
                 corners: 0.0,
+                cell: [0, 0],
             }]],
         };
         let data = vec![0.5f32; DIM];

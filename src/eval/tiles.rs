@@ -9,6 +9,7 @@ use crate::geometry::verify::{
     LeaderVerifier, ModelFit, Reranked, VerifyParams, rerank, with_keypoints,
 };
 use crate::index::MapIndex;
+use crate::search::permute::TileGuide;
 use crate::search::{self, Ranked, SearchOptions, SearchOutcome, TileOrder, permute};
 use cpu_time::ThreadTime;
 use serde::{Deserialize, Serialize};
@@ -24,9 +25,11 @@ pub struct Tile {
     pub area: f32,
     /// Extraction time, in milliseconds.
     pub ms: f32,
-    /// FAST corners counted in it before extraction (what the `richest`
-    /// tile order sorts by; 0 for the coarse pass).
+    /// FAST corners counted in it before extraction (what the tile orders
+    /// `spread` and `richest` read; 0 for the coarse pass).
     pub corners: f32,
+    /// Its cell (column, row) in the grid.
+    pub cell: [u32; 2],
 }
 
 /// A query as the sweep sees it: its words in grid order (tile 0's first),
@@ -95,15 +98,26 @@ impl Query {
         }
         let coarse = usize::from(self.coarse_first);
         let corners: Vec<f32> = self.tiles.iter().skip(coarse).map(|t| t.corners).collect();
+        let cells: Vec<[u32; 2]> = self.tiles.iter().skip(coarse).map(|t| t.cell).collect();
         let corners =
-            (self.tile_order == TileOrder::Richest && corners.len() > 1).then_some(&corners[..]);
+            (self.tile_order.counts_corners() && corners.len() > 1).then_some(&corners[..]);
+        let guide = corners.map(|corners| TileGuide {
+            corners,
+            cells: &cells,
+        });
         let order: Vec<usize> = if self.tiles.len() == 1 {
             vec![0]
         } else {
-            permute::tile_order(self.tiles.len(), self.coarse_first, seed, corners)
-                .into_iter()
-                .map(|t| t as usize)
-                .collect()
+            permute::tile_order(
+                self.tiles.len(),
+                self.coarse_first,
+                seed,
+                self.tile_order,
+                guide,
+            )
+            .into_iter()
+            .map(|t| t as usize)
+            .collect()
         };
         let area: Vec<f64> = self.tiles.iter().map(|t| t.area as f64).collect();
         let shares = permute::expected_shares(&area, self.coarse_first, corners);
@@ -246,6 +260,7 @@ mod tests {
             area: 0.25,
             ms: 5.0,
             corners: 0.0,
+            cell: [0, 0],
         };
         let q = Query {
             words: vec![0; 40],
@@ -292,13 +307,16 @@ mod tests {
             words: (0..4u32).flat_map(|t| [t; 10]).collect(),
             tiles: corners
                 .iter()
-                .map(|&c| Tile {
+                .enumerate()
+                .map(|(t, &c)| Tile {
                     features: 10,
                     area: 0.25,
                     ms: 5.0,
                     corners: c,
+                    cell: [t as u32 % 2, t as u32 / 2],
                 })
                 .collect(),
+            tile_order: TileOrder::Richest,
             ..Query::default()
         };
         let first_tiles = |q: &Query| -> std::collections::HashSet<usize> {
@@ -309,6 +327,16 @@ mod tests {
         assert_eq!(order, [2, 3, 0, 1]);
         let shares: Vec<f64> = spans.iter().map(|s| s.2).collect();
         assert_eq!(shares, [0.6, 0.3, 0.1, 0.0]);
+        // spread: after tile 2 (bottom left), the farthest, tile 1 (top right)
+        let spread = Query {
+            tile_order: TileOrder::Spread,
+            ..q.clone()
+        };
+        assert_eq!(TileOrder::default(), TileOrder::Richest);
+        let (order, spans) = spread.tile_order(7);
+        assert_eq!(order, [2, 1, 3, 0]);
+        let shares: Vec<f64> = spans.iter().map(|s| s.2).collect();
+        assert_eq!(shares, [0.6, 0.0, 0.3, 0.1]);
         // stable-peak 5 stops inside the first tile, on image 2
         let early = SearchOptions {
             rule: RuleSpec::new("stable-peak", Some(5.0)).unwrap(),

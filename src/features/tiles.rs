@@ -11,7 +11,7 @@
 //! upsampled frame), so again every keypoint is found once.
 
 use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage, Scales};
-use crate::search::permute::{self, TileOrder};
+use crate::search::permute::{self, TileGuide, TileOrder};
 use serde::{Deserialize, Serialize};
 
 /// How a query is cut into tiles.
@@ -186,6 +186,19 @@ enum Unit {
     Tile(usize),
 }
 
+/// The cell (column, row) of each of `cores` (row by row, as
+/// [`TileGrid::cores`] gives them).
+fn cells(cores: &[(u32, u32, u32, u32)]) -> Vec<[u32; 2]> {
+    let cols = cores
+        .iter()
+        .take_while(|c| c.1 == cores[0].1)
+        .count()
+        .max(1);
+    (0..cores.len())
+        .map(|t| [(t % cols) as u32, (t / cols) as u32])
+        .collect()
+}
+
 /// The tiles of one image, extracted one at a time in a given order.
 pub struct Tiles {
     frame: Frame,
@@ -233,14 +246,21 @@ impl Tiles {
             .chain(cores.iter().map(|c| fine * c.2 as f64 * c.3 as f64 / all))
             .collect();
         let corners = match order {
-            Some((TileOrder::Richest, _)) if cores.len() > 1 => {
+            Some((o, _)) if o.counts_corners() && cores.len() > 1 => {
                 Some(frame.corners_per_core(&cores)?)
             }
             _ => None,
         };
         let shares = permute::expected_shares(&area, grid.coarse, corners.as_deref());
+        let cells = cells(&cores);
         let order: Vec<Unit> = match order {
-            Some((_, seed)) => permute::tile_order(n, grid.coarse, seed, corners.as_deref()),
+            Some((o, seed)) => {
+                let guide = corners.as_deref().map(|corners| TileGuide {
+                    corners,
+                    cells: &cells,
+                });
+                permute::tile_order(n, grid.coarse, seed, o, guide)
+            }
             None => (0..n as u32).collect(),
         }
         .into_iter()
@@ -271,6 +291,11 @@ impl Tiles {
     /// Units extracted so far.
     pub fn extracted(&self) -> usize {
         self.next
+    }
+
+    /// Each tile's cell (column, row) in the grid, grid order.
+    pub fn cells(&self) -> Vec<[u32; 2]> {
+        cells(&self.cores)
     }
 
     /// FAST corners per tile, grid order ([`super::corners`]): counted now

@@ -23,24 +23,36 @@ const TILE_ORDER_SALT: u64 = 0x7469_6c65_6f72_6465;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum TileOrder {
-    /// Most corners first (FAST corners counted on the half-size frame before
-    /// any tile is extracted); ties in a random order from the seed. The
-    /// tiles richest in keypoints come first, so a search that stops early
-    /// has seen more features for its time (docs/results.md, "Tile order").
+    /// Most corners first (FAST corners counted on the half-size frame
+    /// before any tile is extracted); ties in a random order from the seed.
+    /// The tiles richest in keypoints come first, so a search that stops
+    /// early has seen more features for its time (docs/results.md, "Tile
+    /// order").
     #[default]
     Richest,
+    /// The tile with most corners first, then each next tile the one
+    /// farthest from those already extracted, more corners first among
+    /// equally far ones: the rich part of the image first, then the rest of
+    /// it spread out.
+    Spread,
     /// A random order drawn from the search's seed.
     Random,
 }
 
 impl TileOrder {
-    pub const NAMES: [&'static str; 2] = ["richest", "random"];
+    pub const NAMES: [&'static str; 3] = ["richest", "spread", "random"];
 
     pub fn name(self) -> &'static str {
         match self {
             TileOrder::Richest => "richest",
+            TileOrder::Spread => "spread",
             TileOrder::Random => "random",
         }
+    }
+
+    /// Whether the order reads the tiles' corner counts.
+    pub fn counts_corners(self) -> bool {
+        self != TileOrder::Random
     }
 }
 
@@ -48,6 +60,7 @@ impl std::str::FromStr for TileOrder {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
+            "spread" => Ok(TileOrder::Spread),
             "richest" => Ok(TileOrder::Richest),
             "random" => Ok(TileOrder::Random),
             _ => Err(format!(
@@ -58,6 +71,14 @@ impl std::str::FromStr for TileOrder {
     }
 }
 
+/// What is known of a query's tiles before any is extracted, one entry per
+/// tile in grid order: its FAST corners and its cell (column, row) in the grid.
+#[derive(Debug, Clone, Copy)]
+pub struct TileGuide<'a> {
+    pub corners: &'a [f32],
+    pub cells: &'a [[u32; 2]],
+}
+
 impl std::fmt::Display for TileOrder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
@@ -65,20 +86,52 @@ impl std::fmt::Display for TileOrder {
 }
 
 /// The order in which an image's `n` extraction units are extracted: the
-/// coarse pass (unit 0) first when there is one, then the tiles in a random
-/// order drawn from the search's seed, sorted by `corners` (one count per
-/// tile, grid order; most first) when given.
-pub fn tile_order(n: usize, coarse_first: bool, seed: u64, corners: Option<&[f32]>) -> Vec<u32> {
+/// coarse pass (unit 0) first when there is one, then the tiles in `order`.
+/// Ties, and every tile in the random order or without a `guide` that fits
+/// the tiles, follow a random order drawn from the search's seed.
+pub fn tile_order(
+    n: usize,
+    coarse_first: bool,
+    seed: u64,
+    order: TileOrder,
+    guide: Option<TileGuide<'_>>,
+) -> Vec<u32> {
     let coarse = usize::from(coarse_first && n > 0);
     let mut tiles = permutation(n - coarse, seed ^ TILE_ORDER_SALT);
-    if let Some(corners) = corners.filter(|c| c.len() == tiles.len()) {
+    let fits = |g: &TileGuide<'_>| g.corners.len() == tiles.len() && g.cells.len() == tiles.len();
+    if let Some(g) = guide.filter(fits).filter(|_| order.counts_corners()) {
+        let count = |t: u32| g.corners[t as usize].max(0.0);
         // stable: equal counts keep the random order
-        let count = |t: u32| corners[t as usize].max(0.0);
         tiles.sort_by(|&a, &b| count(b).total_cmp(&count(a)));
+        if order == TileOrder::Spread {
+            tiles = farthest_first(&tiles, g.cells);
+        }
     }
     (0..coarse as u32)
         .chain(tiles.into_iter().map(|t| t + coarse as u32))
         .collect()
+}
+
+/// `ranked` (tiles, best first) reordered so that after the first, each
+/// tile is the one whose nearest already chosen tile is farthest away (in
+/// grid cells); among equally far ones the earlier in `ranked`.
+fn farthest_first(ranked: &[u32], cells: &[[u32; 2]]) -> Vec<u32> {
+    let distance = |a: u32, b: u32| {
+        let ([ax, ay], [bx, by]) = (cells[a as usize], cells[b as usize]);
+        ax.abs_diff(bx).pow(2) + ay.abs_diff(by).pow(2)
+    };
+    let mut left: Vec<u32> = ranked.to_vec();
+    let mut out = Vec::with_capacity(left.len());
+    while !left.is_empty() {
+        let gap = |t: u32| out.iter().map(|&c| distance(t, c)).min().unwrap_or(0);
+        // max_by_key keeps the last of equal keys: search the reversed list
+        let at = (0..left.len())
+            .rev()
+            .max_by_key(|&i| gap(left[i]))
+            .unwrap_or(0);
+        out.push(left.remove(at));
+    }
+    out
 }
 
 /// The share of the image's keypoints each unit is expected to hold, before
@@ -119,36 +172,88 @@ mod tests {
 
     #[test]
     fn a_coarse_pass_comes_first() {
-        let fine = tile_order(4, false, 9, None);
-        let coarse = tile_order(5, true, 9, None);
+        let fine = tile_order(4, false, 9, TileOrder::Random, None);
+        let coarse = tile_order(5, true, 9, TileOrder::Random, None);
         assert_eq!(coarse[0], 0);
         let shifted: Vec<u32> = fine.iter().map(|t| t + 1).collect();
         assert_eq!(coarse[1..], shifted[..]);
     }
 
+    /// A 2 × 2 grid, row by row.
+    const CELLS: [[u32; 2]; 4] = [[0, 0], [1, 0], [0, 1], [1, 1]];
+
+    fn guide(corners: &[f32]) -> Option<TileGuide<'_>> {
+        Some(TileGuide {
+            corners,
+            cells: &CELLS[..corners.len()],
+        })
+    }
+
     #[test]
     fn the_richest_tiles_come_first_ties_at_random() {
         let corners = [3.0, 40.0, 3.0, 12.0];
+        let richest = |seed, coarse: bool| {
+            tile_order(
+                4 + coarse as usize,
+                coarse,
+                seed,
+                TileOrder::Richest,
+                guide(&corners),
+            )
+        };
         for seed in 0..20 {
-            let order = tile_order(4, false, seed, Some(&corners));
+            let order = richest(seed, false);
             assert_eq!(order[..2], [1, 3]);
             let mut rest = order[2..].to_vec();
             rest.sort_unstable();
             assert_eq!(rest, [0, 2]);
             // after a coarse pass, the same tiles shifted by one
-            let coarse = tile_order(5, true, seed, Some(&corners));
-            assert_eq!(coarse[..3], [0, 2, 4]);
+            assert_eq!(richest(seed, true)[..3], [0, 2, 4]);
         }
         // ties: both orders of tiles 0 and 2 occur
-        let firsts: std::collections::HashSet<u32> = (0..40)
-            .map(|seed| tile_order(4, false, seed, Some(&corners))[2])
-            .collect();
-        assert_eq!(firsts.len(), 2);
-        // a count of the wrong length is ignored
+        let thirds: std::collections::HashSet<u32> =
+            (0..40).map(|seed| richest(seed, false)[2]).collect();
+        assert_eq!(thirds.len(), 2);
+        // a guide of the wrong length, or the random order, ignores the counts
+        let random = tile_order(4, false, 9, TileOrder::Random, None);
         assert_eq!(
-            tile_order(4, false, 9, Some(&[1.0])),
-            tile_order(4, false, 9, None)
+            tile_order(4, false, 9, TileOrder::Richest, guide(&[1.0])),
+            random
         );
+        assert_eq!(
+            tile_order(4, false, 9, TileOrder::Random, guide(&corners)),
+            random
+        );
+    }
+
+    #[test]
+    fn spread_takes_the_richest_then_the_farthest() {
+        // tile 1 (top right) is richest; the farthest from it is tile 2
+        // (bottom left), whatever its corners; then tile 3 before tile 0
+        let corners = [30.0, 40.0, 1.0, 35.0];
+        for seed in 0..20 {
+            assert_eq!(
+                tile_order(4, false, seed, TileOrder::Spread, guide(&corners)),
+                [1, 2, 3, 0]
+            );
+            assert_eq!(
+                tile_order(5, true, seed, TileOrder::Spread, guide(&corners)),
+                [0, 2, 3, 4, 1]
+            );
+        }
+        // a 3 × 3 grid from a corner: the far corner, then the two others
+        let cells: Vec<[u32; 2]> = (0..9).map(|t| [t % 3, t / 3]).collect();
+        let mut corners = [1.0f32; 9];
+        corners[0] = 9.0;
+        let g = Some(TileGuide {
+            corners: &corners,
+            cells: &cells,
+        });
+        let order = tile_order(9, false, 3, TileOrder::Spread, g);
+        assert_eq!(order[..2], [0, 8]);
+        let mut next = order[2..4].to_vec();
+        next.sort_unstable();
+        assert_eq!(next, [2, 6]);
     }
 
     #[test]

@@ -228,7 +228,8 @@ pub struct SearchDefaults {
     /// a `,coarse` suffix extracts the whole image at half size first; an
     /// `,auto` suffix learns for the map whether to ([`crate::features::CoarseChoice`]).
     pub tiles: String,
-    /// The order tiles are extracted in: `richest` (most FAST corners first)
+    /// The order tiles are extracted in: `richest` (most FAST corners first),
+    /// `spread` (the richest, then the farthest from those taken)
     /// or `random`.
     pub tile_order: crate::search::TileOrder,
     /// Weigh votes by the features' Hamming signatures (false: plain tf-idf).

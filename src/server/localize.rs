@@ -67,7 +67,8 @@ pub struct LocalizeParams {
     #[param(value_type = Option<String>, example = "2x2+24")]
     pub tiles: Option<String>,
     /// The order the tiles are extracted in: `richest` (most FAST corners
-    /// first) or `random` (drawn from the seed). Default: the configured order.
+    /// first), `spread` (the richest tile, then the farthest from those
+    /// taken) or `random` (drawn from the seed). Default: the configured order.
     #[param(value_type = Option<String>, example = "richest")]
     pub tile_order: Option<String>,
     /// Verify the top vote candidates geometrically and re-rank them by

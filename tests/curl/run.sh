@@ -201,6 +201,9 @@ check "rule=none without tiles= extracts the image whole" jqt --arg s "$status" 
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=2x2%2B24&tile_order=random&seed=3")
 check "tile_order=random is reported and extracts every tile" jqt --arg s "$status" '
   $s == "200" and .tiles == {"extracted": 4, "total": 4, "grid": "2x2+24", "order": "random"}' "$B"
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=2x2%2B24&tile_order=spread&seed=3")
+check "tile_order=spread is reported and extracts every tile" jqt --arg s "$status" '
+  $s == "200" and .tiles == {"extracted": 4, "total": 4, "grid": "2x2+24", "order": "spread"}' "$B"
 for bad in "tiles=0x2" "tile_order=sideways" "rule=none&threshold=2" "rule=peak-mean&inliers=12" "rule=verified&inliers=3"; do
   status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?$bad")
   check "$bad is 400 invalid_parameter ($(jq -r .error.message "$B"))" \
