@@ -24,6 +24,10 @@ use rayon::prelude::*;
 
 const RUNS: u64 = 3;
 
+/// A query's descriptors, and for each its 3 nearest words with their
+/// squared distances, nearest first.
+type Nearest = (Array2<f32>, Vec<[(u32, f32); 3]>);
+
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let tiled = args.get(4).is_some_and(|s| s == "tiles");
@@ -43,7 +47,7 @@ fn main() -> anyhow::Result<()> {
     let centroids = vocab.centroids().to_owned();
     let cnorm: Vec<f32> = centroids.rows().into_iter().map(|r| r.dot(&r)).collect();
     // Per query: for each feature, its 3 nearest words and squared distances.
-    let nearest: Vec<Option<(Array2<f32>, Vec<[(u32, f32); 3]>)>> = (0..queries.len())
+    let nearest: Vec<Option<Nearest>> = (0..queries.len())
         .into_par_iter()
         .map(|q| {
             queries.image(q).map(|d| {
