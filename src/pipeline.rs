@@ -89,10 +89,7 @@ pub fn extract_tiled(
     grid: TileGrid,
 ) -> Result<(Features, Vec<TileCost>), FeatureError> {
     let mut tiles = Tiles::new(image, config, grid, None)?;
-    let corners = match grid.cols * grid.rows > 1 {
-        true => tiles.corners()?,
-        false => Vec::new(),
-    };
+    let corners = tiles.corners()?;
     let cells = tiles.cells();
     let coarse = usize::from(grid.coarse);
     let mut parts = Vec::with_capacity(tiles.total());
@@ -102,7 +99,7 @@ pub fn extract_tiled(
         let started = ThreadTime::now();
         let Some(tile) = tiles.next_tile() else { break };
         let tile = tile?;
-        let share = tiles.area_extracted();
+        let share = tiles.share_extracted();
         let unit = costs.len();
         costs.push(TileCost {
             features: tile.len(),
@@ -635,7 +632,7 @@ impl Localizer {
                     tile.descriptors.view(),
                     options.block,
                 );
-                full.feed_tile(tile.len(), tiles.area_extracted(), last, quantize, None);
+                full.feed_tile(tile.len(), tiles.share_extracted(), last, quantize, None);
             }
             if search.stopped() {
                 continue;
@@ -657,7 +654,7 @@ impl Localizer {
             };
             search.feed_tile(
                 tile.len(),
-                tiles.area_extracted(),
+                tiles.share_extracted(),
                 last,
                 quantize,
                 Some(&mut check),

@@ -2,8 +2,8 @@
 
 use bowloc::features::{ExtractConfig, SiftParams};
 use bowloc::geometry::verify::{Estimator, Model, Order, VerifyParams};
-use bowloc::search::SearchOptions;
 use bowloc::search::stop::{GENERIC_PARAMETER, RULES, parse_rule};
+use bowloc::search::{SearchOptions, TileOrder};
 use bowloc::sequence::{Motion, SequenceModel};
 use clap::Args;
 use clap::builder::{PossibleValue, PossibleValuesParser};
@@ -57,6 +57,17 @@ pub fn place_window(text: &str) -> Result<u32, String> {
         .parse()
         .map_err(|e| format!("not a whole number ≥ 0: {e}"))?;
     SearchOptions::check_place_window(window)
+}
+
+/// The tile orders, each with what it does, parsed to a [`TileOrder`].
+pub fn tile_order_parser() -> impl clap::builder::TypedValueParser<Value = TileOrder> {
+    use clap::builder::TypedValueParser as _;
+    PossibleValuesParser::new(
+        TileOrder::ALL
+            .iter()
+            .map(|o| PossibleValue::new(o.name()).help(o.about())),
+    )
+    .map(|name: String| name.parse::<TileOrder>().expect("a listed tile order"))
 }
 
 fn rule_parser() -> PossibleValuesParser {
@@ -113,9 +124,9 @@ pub struct SearchArgs {
     /// Images on each side, along the map's order, that count as one place when a candidate's distinctness is measured.
     #[arg(long, default_value_t = SearchOptions::recommended().place_window, value_parser = place_window)]
     pub place_window: u32,
-    /// The order tiles are extracted in: richest (most FAST corners first), spread (the richest, then the farthest from those taken) or random.
-    #[arg(long, default_value_t = SearchOptions::recommended().tile_order)]
-    pub tile_order: bowloc::search::TileOrder,
+    /// The order tiles are extracted in.
+    #[arg(long, default_value_t = SearchOptions::recommended().tile_order, value_parser = tile_order_parser())]
+    pub tile_order: TileOrder,
 }
 
 impl SearchArgs {

@@ -60,10 +60,8 @@ pub struct EvalArgs {
     /// pass first). The full search also runs on whole queries.
     #[arg(long, default_value = "2x2+24")]
     tiles: TileGrid,
-    /// The order the tiles are replayed in, as the service extracts them:
-    /// richest (most FAST corners first), spread (the richest, then the
-    /// farthest from those taken) or random.
-    #[arg(long, default_value_t = bowloc::search::TileOrder::default())]
+    /// The order the tiles are replayed in, as the service extracts them.
+    #[arg(long, default_value_t = bowloc::search::TileOrder::default(), value_parser = super::args::tile_order_parser())]
     tile_order: bowloc::search::TileOrder,
     /// Images on each side, along the map's order, that count as one place
     /// when a candidate's distinctness is measured (and for the rule

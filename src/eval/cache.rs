@@ -158,7 +158,6 @@ impl DescriptorSet {
             fixed_ms: (self.extract_ms(i) - in_tiles).max(0.0) as f32,
             tiles,
             coarse_first: self.meta.grid.coarse,
-            tile_order: Default::default(),
             geometry: None,
         }
     }

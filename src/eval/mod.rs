@@ -361,7 +361,6 @@ fn validate(config: &EvalConfig) -> anyhow::Result<Vec<&'static RuleGrid>> {
 fn quantize_queries(
     set: &cache::DescriptorSet,
     vocab: &Vocabulary,
-    tile_order: crate::search::TileOrder,
     what: &str,
 ) -> (Vec<Query>, Vec<QueryCost>) {
     let quantizer = vocab.exact_quantizer();
@@ -381,11 +380,7 @@ fn quantize_queries(
             let cost = QueryCost {
                 quantize_ms_per_feature: w.quantize_ms_per_feature,
             };
-            let query = Query {
-                tile_order,
-                ..set.query(q, w.words, w.signatures)
-            };
-            (query, cost)
+            (set.query(q, w.words, w.signatures), cost)
         })
         .collect();
     bar.finish_and_clear();
@@ -529,7 +524,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         params: verify_params.clone(),
     });
     let quantize = |set: &cache::DescriptorSet, v: &Vocabulary, what: String| {
-        let (queries, costs) = quantize_queries(set, v, config.tile_order, &what);
+        let (queries, costs) = quantize_queries(set, v, &what);
         SeedWords { queries, costs }
     };
     let per_seed: Vec<SeedWords> = vocabs
@@ -562,13 +557,18 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         (calibrated * warmups.len() * config.targets.len()) as u64,
         "calibrating grids",
     );
+    let ranking = sweep::Ranking {
+        top_n: summary::TOP_N.iter().copied().max().unwrap_or(10),
+        place_window: config.place_window,
+        tile_order: config.tile_order,
+    };
     let (mut settings, calibrations) = sweep::plan(
         &maps[0],
         &per_seed[0].queries,
         &grids,
         &warmups,
         &config.targets,
-        config.place_window,
+        ranking,
         &bar,
     )?;
     bar.finish_and_clear();
@@ -606,10 +606,6 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         "sweeping"
     );
 
-    let ranking = sweep::Ranking {
-        top_n: summary::TOP_N.iter().copied().max().unwrap_or(10),
-        place_window: config.place_window,
-    };
     let bar = progress_bar((counts.len() * seeds.len()) as u64, "sweeping");
     let outcomes: Vec<Vec<Vec<Vec<Outcome>>>> = maps
         .iter()

@@ -316,14 +316,9 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
     let mut per_mode: Vec<Vec<ModeSeed>> = vec![Vec::new(); modes.len()];
     for (v, map) in vocabs.iter().zip(&maps) {
         let seed = v.meta().seed;
-        let (queries, _) = quantize_queries(
-            &query_desc,
-            v,
-            Default::default(),
-            &format!("quantizing (seed {seed})"),
-        );
+        let (queries, _) = quantize_queries(&query_desc, v, &format!("quantizing (seed {seed})"));
         let injected: Vec<Query> = match &inject_desc {
-            Some(d) => quantize_queries(d, v, Default::default(), "quantizing injected images").0,
+            Some(d) => quantize_queries(d, v, "quantizing injected images").0,
             None => Vec::new(),
         };
         let jobs: Vec<(usize, u32)> = (0..modes.len())

@@ -99,12 +99,8 @@ fn seed_maps(config: &ShardsConfig) -> anyhow::Result<Vec<(u64, MapIndex, Vec<Qu
             };
             let vocab = cache::vocabulary(&config.cache, &map_desc, &kmeans)?;
             let map = cache::map_index(&config.cache, &vocab, &map_desc, &dataset.name)?;
-            let (queries, _) = super::quantize_queries(
-                &query_desc,
-                &vocab,
-                Default::default(),
-                &format!("quantizing (seed {seed})"),
-            );
+            let (queries, _) =
+                super::quantize_queries(&query_desc, &vocab, &format!("quantizing (seed {seed})"));
             Ok((seed, map, queries))
         })
         .collect()
@@ -174,7 +170,7 @@ fn compare(
                 ..setting.options(sweep::seed(run, q), sweep::Ranking::top(config.top_n))
             };
             let one = query.search(map, &options, false).outcome;
-            let (_, spans) = query.tile_order(options.seed);
+            let (_, spans) = query.tile_order(options.seed, options.tile_order);
             let s = shard::search_tiles(sharded, &query.batches(&spans), &options);
             let identical = s.outcome.candidates == one.candidates
                 && s.outcome.features_used == one.features_used

@@ -7,7 +7,9 @@ use super::tiles::Query;
 use crate::calibrate::median_features;
 use crate::index::MapIndex;
 use crate::search::stop::RULES;
-use crate::search::{KnownFeatures, Ranked, RuleSpec, SearchOptions, StopKind, search_words};
+use crate::search::{
+    KnownFeatures, Ranked, RuleSpec, SearchOptions, StopKind, TileOrder, search_words,
+};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::{Serialize, Serializer};
@@ -113,6 +115,7 @@ impl Setting {
             rule: self.rule.clone(),
             top_n: ranking.top_n,
             place_window: ranking.place_window,
+            tile_order: ranking.tile_order,
             seed,
             min_features: self.min_features,
             ..SearchOptions::default()
@@ -120,21 +123,23 @@ impl Setting {
     }
 }
 
-/// How every search of a sweep ranks its answer: the candidates it keeps,
-/// and the place window their distinctness (and the rule `place-lead`) is
-/// measured with.
+/// How every search of a sweep runs besides its setting: the candidates it
+/// keeps, the place window their distinctness (and the rule `place-lead`)
+/// is measured with, and the order its query's tiles are replayed in.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ranking {
     pub top_n: usize,
     pub place_window: u32,
+    pub tile_order: TileOrder,
 }
 
 impl Ranking {
-    /// The top `n`, with the service's default place window.
+    /// The top `n`, with the service's default place window and tile order.
     pub fn top(n: usize) -> Self {
         Self {
             top_n: n,
             place_window: SearchOptions::PLACE_WINDOW,
+            tile_order: TileOrder::default(),
         }
     }
 }
@@ -291,18 +296,18 @@ pub fn search_query(
     }
 }
 
-/// Mean fraction of features `setting` uses over all queries in `run`, an
-/// image's place being the `place_window` images on each side.
+/// Mean fraction of features `setting` uses over all queries in `run`,
+/// each search otherwise run as `ranking` says (keeping its top candidate).
 pub fn mean_fraction(
     map: &MapIndex,
     queries: &[Query],
     setting: &Setting,
     run: u32,
-    place_window: u32,
+    ranking: Ranking,
 ) -> f64 {
     let ranking = Ranking {
         top_n: 1,
-        place_window,
+        ..ranking
     };
     let total: f64 = queries
         .par_iter()
@@ -416,7 +421,7 @@ pub fn calibrate(
     (lo, hi, whole): (f64, f64, bool),
     min_features: usize,
     targets: &[f64],
-    place_window: u32,
+    ranking: Ranking,
     bar: &ProgressBar,
 ) -> anyhow::Result<Vec<Calibration>> {
     let setting = |p: f64| -> anyhow::Result<Setting> {
@@ -433,7 +438,7 @@ pub fn calibrate(
             return v;
         }
         let s = setting(p).expect("within the checked range");
-        let v = mean_fraction(map, queries, &s, CALIBRATION_RUN, place_window);
+        let v = mean_fraction(map, queries, &s, CALIBRATION_RUN, ranking);
         memo.lock().expect("not poisoned").insert(p.to_bits(), v);
         v
     };
@@ -484,7 +489,7 @@ pub fn plan(
     grids: &[&RuleGrid],
     warmups: &[usize],
     targets: &[f64],
-    place_window: u32,
+    ranking: Ranking,
     bar: &ProgressBar,
 ) -> anyhow::Result<(Vec<Setting>, Vec<Calibration>)> {
     let first = warmups.first().copied().unwrap_or(0);
@@ -508,7 +513,7 @@ pub fn plan(
                         (lo, hi, whole),
                         w,
                         targets,
-                        place_window,
+                        ranking,
                         bar,
                     )?;
                     let mut seen: Vec<f64> = Vec::new();
@@ -668,8 +673,10 @@ mod tests {
         for run in &r[1] {
             assert!(run.iter().all(|o| o.used == 20 && o.candidates.len() <= 2));
         }
-        let window = SearchOptions::PLACE_WINDOW;
-        assert_eq!(mean_fraction(&map, &queries, &settings[1], 0, window), 0.5);
+        assert_eq!(
+            mean_fraction(&map, &queries, &settings[1], 0, Ranking::top(1)),
+            0.5
+        );
     }
 
     #[test]
@@ -688,7 +695,7 @@ mod tests {
             (0.2, 1.0, false),
             0,
             &[0.1, 0.5],
-            SearchOptions::PLACE_WINDOW,
+            Ranking::top(1),
             &bar,
         )
         .unwrap();
@@ -703,7 +710,7 @@ mod tests {
             &[rule_grid("stable-peak").unwrap()],
             &[40],
             &[0.5],
-            SearchOptions::PLACE_WINDOW,
+            Ranking::top(1),
             &bar,
         )
         .unwrap();
@@ -736,7 +743,7 @@ mod tests {
             (0.01, 1.0, false),
             0,
             &[0.3, 0.7],
-            SearchOptions::PLACE_WINDOW,
+            Ranking::top(1),
             &bar,
         )
         .unwrap();
@@ -757,7 +764,7 @@ mod tests {
             ],
             &[0, 5],
             &[0.5, 0.9],
-            SearchOptions::PLACE_WINDOW,
+            Ranking::top(1),
             &bar,
         )
         .unwrap();

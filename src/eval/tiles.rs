@@ -47,8 +47,6 @@ pub struct Query {
     pub fixed_ms: f32,
     /// Tile 0 is a coarse pass, extracted first ([`crate::features::TileGrid::coarse`]).
     pub coarse_first: bool,
-    /// The order the service extracts its tiles in.
-    pub tile_order: TileOrder,
     /// How to verify it geometrically (the `verified` stop and re-ranking).
     pub geometry: Option<Arc<Geometry>>,
 }
@@ -82,12 +80,16 @@ impl Query {
         }
     }
 
-    /// The tiles in the order the service extracts them for `seed` (and
-    /// [`Query::tile_order`]): their numbers in grid order, and each one's
-    /// features as a span of [`words`](Self::words) with the share of the
-    /// image's keypoints the service expects it to hold. A query without
-    /// tiles is one tile, the whole image.
-    pub fn tile_order(&self, seed: u64) -> (Vec<usize>, Vec<(usize, usize, f64)>) {
+    /// The tiles in the order the service extracts them in `tile_order` for
+    /// `seed`: their numbers in grid order, and each one's features as a
+    /// span of [`words`](Self::words) with the share of the image's keypoints
+    /// the service expects it to hold. A query without tiles is one tile, the
+    /// whole image.
+    pub fn tile_order(
+        &self,
+        seed: u64,
+        tile_order: TileOrder,
+    ) -> (Vec<usize>, Vec<(usize, usize, f64)>) {
         if self.tiles.is_empty() {
             return (vec![0], vec![(0, self.words.len(), 1.0)]);
         }
@@ -99,8 +101,7 @@ impl Query {
         let coarse = usize::from(self.coarse_first);
         let corners: Vec<f32> = self.tiles.iter().skip(coarse).map(|t| t.corners).collect();
         let cells: Vec<[u32; 2]> = self.tiles.iter().skip(coarse).map(|t| t.cell).collect();
-        let corners =
-            (self.tile_order.counts_corners() && corners.len() > 1).then_some(&corners[..]);
+        let corners = (tile_order.counts_corners() && corners.len() > 1).then_some(&corners[..]);
         let guide = corners.map(|corners| TileGuide {
             corners,
             cells: &cells,
@@ -108,16 +109,10 @@ impl Query {
         let order: Vec<usize> = if self.tiles.len() == 1 {
             vec![0]
         } else {
-            permute::tile_order(
-                self.tiles.len(),
-                self.coarse_first,
-                seed,
-                self.tile_order,
-                guide,
-            )
-            .into_iter()
-            .map(|t| t as usize)
-            .collect()
+            permute::tile_order(self.tiles.len(), self.coarse_first, seed, tile_order, guide)
+                .into_iter()
+                .map(|t| t as usize)
+                .collect()
         };
         let area: Vec<f64> = self.tiles.iter().map(|t| t.area as f64).collect();
         let shares = permute::expected_shares(&area, self.coarse_first, corners);
@@ -156,7 +151,7 @@ impl Query {
     /// candidates re-ranked by geometric verification afterwards. A rule
     /// that verifies its leader (`verified`) does so with [`Query::geometry`].
     pub fn search(&self, map: &MapIndex, options: &SearchOptions, verify: bool) -> Replay {
-        let (order, spans) = self.tile_order(options.seed);
+        let (order, spans) = self.tile_order(options.seed, options.tile_order);
         let batches = self.batches(&spans);
         // keypoints in the order the features are given to the search
         let fed_keypoints: Vec<Keypoint> = if self.keypoints.len() == self.words.len() {
@@ -316,39 +311,42 @@ mod tests {
                     cell: [t as u32 % 2, t as u32 / 2],
                 })
                 .collect(),
-            tile_order: TileOrder::Richest,
             ..Query::default()
         };
-        let first_tiles = |q: &Query| -> std::collections::HashSet<usize> {
-            (0..32).map(|seed| q.tile_order(seed).0[0]).collect()
+        let first_tiles = |order: TileOrder| -> std::collections::HashSet<usize> {
+            (0..32).map(|seed| q.tile_order(seed, order).0[0]).collect()
         };
-        assert_eq!(first_tiles(&q), [2].into());
-        let (order, spans) = q.tile_order(7);
+        assert_eq!(first_tiles(TileOrder::Richest), [2].into());
+        let (order, spans) = q.tile_order(7, TileOrder::Richest);
         assert_eq!(order, [2, 3, 0, 1]);
         let shares: Vec<f64> = spans.iter().map(|s| s.2).collect();
         assert_eq!(shares, [0.6, 0.3, 0.1, 0.0]);
         // spread: after tile 2 (bottom left), the farthest, tile 1 (top right)
-        let spread = Query {
-            tile_order: TileOrder::Spread,
-            ..q.clone()
-        };
-        assert_eq!(TileOrder::default(), TileOrder::Richest);
-        let (order, spans) = spread.tile_order(7);
+        let (order, spans) = q.tile_order(7, TileOrder::Spread);
         assert_eq!(order, [2, 1, 3, 0]);
         let shares: Vec<f64> = spans.iter().map(|s| s.2).collect();
         assert_eq!(shares, [0.6, 0.0, 0.3, 0.1]);
+        // the search replays the options' order: richest by default, where
         // stable-peak 5 stops inside the first tile, on image 2
+        assert_eq!(TileOrder::default(), TileOrder::Richest);
         let early = SearchOptions {
             rule: RuleSpec::new("stable-peak", Some(5.0)).unwrap(),
             ..SearchOptions::default()
         };
         let r = q.search(&map, &early, false);
         assert_eq!((r.tiles, r.outcome.candidates[0].id), (1, 2));
-        // at random, other tiles come first too
-        let random = Query {
-            tile_order: TileOrder::Random,
-            ..q.clone()
-        };
-        assert!(first_tiles(&random).len() > 1);
+        // at random, other tiles come first too, and the search follows
+        assert!(first_tiles(TileOrder::Random).len() > 1);
+        let firsts: std::collections::HashSet<u32> = (0..32)
+            .map(|seed| {
+                let random = SearchOptions {
+                    seed,
+                    tile_order: TileOrder::Random,
+                    ..early.clone()
+                };
+                q.search(&map, &random, false).outcome.candidates[0].id
+            })
+            .collect();
+        assert!(firsts.len() > 1, "{firsts:?}");
     }
 }

@@ -206,8 +206,8 @@ pub struct Tiles {
     margin: u32,
     /// The units in extraction order: the coarse pass (if any) first.
     order: Vec<Unit>,
-    /// Each unit's expected share of the image's keypoints, by unit number
-    /// (the coarse pass first).
+    /// Each unit's expected share of the image's keypoints, in extraction
+    /// order.
     shares: Vec<f64>,
     /// FAST corners per tile (grid order), once counted.
     corners: Option<Vec<f32>>,
@@ -270,6 +270,14 @@ impl Tiles {
             (false, u) => Unit::Tile(u),
         })
         .collect();
+        let coarse = usize::from(grid.coarse);
+        let shares = order
+            .iter()
+            .map(|u| match *u {
+                Unit::Coarse => shares[0],
+                Unit::Tile(i) => shares[i + coarse],
+            })
+            .collect();
         let cap = config.sift.max_features as usize;
         Ok(Self {
             margin: if cores.len() == 1 { 0 } else { grid.margin },
@@ -299,9 +307,10 @@ impl Tiles {
     }
 
     /// FAST corners per tile, grid order ([`super::corners`]): counted now
-    /// unless the tile order already did.
+    /// unless the tile order already did; none for an image in one tile,
+    /// which has nothing to order.
     pub fn corners(&mut self) -> Result<Vec<f32>, FeatureError> {
-        if self.corners.is_none() {
+        if self.corners.is_none() && self.cores.len() > 1 {
             self.corners = Some(self.frame.corners_per_core(&self.cores)?);
         }
         Ok(self.corners.clone().unwrap_or_default())
@@ -311,15 +320,8 @@ impl Tiles {
     /// before they are counted: each tile's share of the frame's area, or of
     /// its corners when the tiles are ordered by them (of what the coarse
     /// pass leaves, [`TileGrid::COARSE_SHARE`], after one).
-    pub fn area_extracted(&self) -> f64 {
-        let unit = |u: &Unit| match *u {
-            Unit::Coarse => 0,
-            Unit::Tile(i) => i + usize::from(self.order.first() == Some(&Unit::Coarse)),
-        };
-        self.order[..self.next]
-            .iter()
-            .map(|u| self.shares[unit(u)])
-            .sum::<f64>()
+    pub fn share_extracted(&self) -> f64 {
+        self.shares[..self.next].iter().sum()
     }
 
     /// Extract the next unit: its features in frame coordinates.

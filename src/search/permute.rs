@@ -40,13 +40,23 @@ pub enum TileOrder {
 }
 
 impl TileOrder {
-    pub const NAMES: [&'static str; 3] = ["richest", "spread", "random"];
+    /// Every order, the default first.
+    pub const ALL: [TileOrder; 3] = [TileOrder::Richest, TileOrder::Spread, TileOrder::Random];
 
     pub fn name(self) -> &'static str {
         match self {
             TileOrder::Richest => "richest",
             TileOrder::Spread => "spread",
             TileOrder::Random => "random",
+        }
+    }
+
+    /// What the order does, in a line (for help texts).
+    pub fn about(self) -> &'static str {
+        match self {
+            TileOrder::Richest => "most FAST corners first",
+            TileOrder::Spread => "the richest tile, then each next the farthest from those taken",
+            TileOrder::Random => "a random order drawn from the seed",
         }
     }
 
@@ -59,15 +69,16 @@ impl TileOrder {
 impl std::str::FromStr for TileOrder {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "spread" => Ok(TileOrder::Spread),
-            "richest" => Ok(TileOrder::Richest),
-            "random" => Ok(TileOrder::Random),
-            _ => Err(format!(
-                "unknown tile order {s:?}; expected one of {}",
-                Self::NAMES.join(", ")
-            )),
-        }
+        Self::ALL
+            .into_iter()
+            .find(|o| o.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Self::ALL.iter().map(|o| o.name()).collect();
+                format!(
+                    "unknown tile order {s:?}; expected one of {}",
+                    names.join(", ")
+                )
+            })
     }
 }
 

@@ -727,6 +727,14 @@ mod tests {
             comments.contains(&parameters),
             "config/default.toml must list the parameters as `{parameters}`"
         );
+        // every tile order, quoted
+        for order in crate::search::TileOrder::ALL {
+            let quoted = format!("\"{}\"", order.name());
+            assert!(
+                comments.contains(&quoted),
+                "config/default.toml must describe the tile order {quoted}"
+            );
+        }
     }
 
     #[test]
