@@ -120,9 +120,12 @@ pub struct Report {
     pub top: Vec<(f32, u32)>,
     /// Σ h over its images.
     pub sum: f64,
-    /// Σ v² of its leader, the largest Σ v² of its other images, and the
-    /// largest of all its images (with `Needs::squares`).
-    pub squares: [f32; 3],
+    /// Σ v² of each of its leading images, in `top`'s order (with
+    /// `Needs::squares`).
+    pub top_squares: Vec<f32>,
+    /// The largest Σ v² of its images other than its leader, and of all its
+    /// images (with `Needs::squares`).
+    pub squares: [f32; 2],
     /// `best_outside(k, left)` over its images for k = 0, 1, … (with
     /// `Needs::outside`, once N is known).
     pub outside: Vec<f32>,
@@ -135,11 +138,15 @@ impl Report {
         let leader = voter.top().first().map(|e| e.1);
         let squares = match (needs.squares, leader) {
             (true, Some(l)) => [
-                voter.squares_of(l),
                 voter.max_squares_except(l),
                 voter.max_squares_except(u32::MAX),
             ],
-            _ => [0.0; 3],
+            _ => [0.0; 2],
+        };
+        let top_squares = if needs.squares {
+            voter.top().iter().map(|&(_, j)| voter.squares_of(j)).collect()
+        } else {
+            Vec::new()
         };
         let outside = match (needs.outside, voter.tally().remaining()) {
             (true, Some(left)) => voter.best_outside_each(needs.top, left as f32),
@@ -148,6 +155,7 @@ impl Report {
         Self {
             top,
             sum: voter.tally().sum,
+            top_squares,
             squares,
             outside,
         }
@@ -156,7 +164,10 @@ impl Report {
     /// Bytes of the report in a packed encoding: 8 per (h, id) entry, 8 for
     /// the sum, 4 per other number.
     fn bytes(&self, needs: Needs) -> usize {
-        8 * self.top.len() + 8 + if needs.squares { 12 } else { 0 } + 4 * self.outside.len()
+        8 * self.top.len()
+            + 8
+            + if needs.squares { 8 + 4 * self.top.len() } else { 0 }
+            + 4 * self.outside.len()
     }
 }
 
@@ -222,15 +233,16 @@ impl VoteStats for Merged<'_> {
         &self.ranked[..self.keep.min(self.ranked.len())]
     }
 
-    /// Known for each shard's leader, so for the overall leader: the one
-    /// image a rule asks about. Other images answer 0.
+    /// Known for each image in its shard's leaders, so for every image of
+    /// [`top`](VoteStats::top): the images a rule asks about. Other images
+    /// answer 0.
     fn squares_of(&self, j: u32) -> f32 {
         let r = &self.reports[shard_of(j, self.shards())];
-        if r.top.first().map(|e| e.1) == Some(j) {
-            r.squares[0]
-        } else {
-            0.0
-        }
+        r.top
+            .iter()
+            .position(|e| e.1 == j)
+            .and_then(|i| r.top_squares.get(i).copied())
+            .unwrap_or(0.0)
     }
 
     /// Exact when `j` is a shard's leader (the overall leader is).
@@ -239,9 +251,9 @@ impl VoteStats for Merged<'_> {
             .iter()
             .map(|r| {
                 if r.top.first().map(|e| e.1) == Some(j) {
-                    r.squares[1]
+                    r.squares[0]
                 } else {
-                    r.squares[2]
+                    r.squares[1]
                 }
             })
             .fold(0.0, f32::max)

@@ -137,7 +137,7 @@ pub trait VoteStats {
     fn top(&self) -> &[(f32, u32)];
 
     /// Σ v² of image `j`'s per-feature votes (needs `Needs::squares`; asked
-    /// only of the leader).
+    /// only of the images in [`top`](Self::top)).
     fn squares_of(&self, j: u32) -> f32;
 
     /// The largest Σ v² of any image other than `j` (needs `Needs::squares`).

@@ -10,6 +10,7 @@ mod lossless;
 mod none;
 mod peak_mean;
 mod place_lead;
+mod place_z;
 mod posterior;
 mod relative;
 mod stable_peak;
@@ -235,6 +236,7 @@ pub const RULES: &[RuleInfo] = &[
     none::INFO,
     peak_mean::INFO,
     place_lead::INFO,
+    place_z::INFO,
     relative::INFO,
     stable_peak::INFO,
     hoeffding::INFO,

@@ -495,3 +495,61 @@ fn place_lead_reads_enough_leaders_to_find_another_place() {
     );
     assert_eq!(threshold, 1.0);
 }
+
+#[test]
+fn place_z_is_the_lead_over_the_best_other_place_in_units_of_its_spread() {
+    // Every vote is u, so an image with c votes has h = c·u and Σv² = c·u²,
+    // and z = (c_leader − c_other) / √(c_leader + c_other) whatever u is.
+    // Along [0,1,1,0,0,5,0] with a place of ±1 image (leader: other):
+    // (0: –) 1, (0: –) 1, (1: –) √2, (0: –) √2, (0: –) √3, (0: 5) 2/2 = 1,
+    // (0: 5) 3/√5.
+    let s = [0, 1, 1, 0, 0, 5, 0];
+    for images in [8, 16, 64] {
+        let z = |t| spec("place-z", t);
+        assert_eq!(stops_at_in_place(z(1.2), images, 1, &s), Some(3));
+        assert_eq!(stops_at_in_place(z(1.5), images, 1, &s), Some(5));
+        assert_eq!(stops_at_in_place(z(1.8), images, 1, &s), None);
+        // each image its own place, so 1 rivals 0: z = 1, 0, 1/√3, 0,
+        // 1/√5, 1/√5, 2/√6; checked from the second feature on
+        let own = RuleContext {
+            place_window: 0,
+            ..Default::default()
+        };
+        let map = one_word_each(images);
+        assert_eq!(stops_on(&map, &own, z(0.5), &s, None, 2), Some(3));
+        assert_eq!(stops_on(&map, &own, z(0.7), &s, None, 2), Some(7));
+        assert_eq!(stops_on(&map, &own, z(0.9), &s, None, 2), None);
+    }
+}
+
+/// `rule`'s statistic after `stream` on a map of `images` images, a place
+/// of ±1 image.
+fn statistic_after(name: &str, images: u32, stream: &[u32]) -> f64 {
+    let map = one_word_each(images);
+    let view = map.view();
+    let rule = spec(name, 1.0).build(&RuleContext {
+        place_window: 1,
+        ..Default::default()
+    });
+    let mut voter = Voter::with_needs(&view, rule.needs());
+    for &w in stream {
+        voter.vote(w, 0);
+    }
+    rule.statistic(&voter).unwrap().0
+}
+
+#[test]
+fn place_z_asks_more_lead_per_feature_of_a_long_query() {
+    // The same lead of 2 votes, over the best other place, after 2 features
+    // and after 10: `place-lead` sees the same evidence in both; `place-z`
+    // sees 2/√2 against 2/√10.
+    let short = [0, 0];
+    let long = [0, 4, 0, 4, 0, 4, 0, 4, 0, 0];
+    let u = 8f64.ln();
+    let lead = |s: &[u32]| statistic_after("place-lead", 8, s);
+    assert!((lead(&short) - 2.0 * u).abs() < 1e-4);
+    assert!((lead(&long) - 2.0 * u).abs() < 1e-4);
+    let z = |s: &[u32]| statistic_after("place-z", 8, s);
+    assert!((z(&short) - 2f64.sqrt()).abs() < 1e-4, "{}", z(&short));
+    assert!((z(&long) - 2.0 / 10f64.sqrt()).abs() < 1e-4, "{}", z(&long));
+}
