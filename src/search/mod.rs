@@ -95,9 +95,13 @@ impl Default for SearchOptions {
 
 impl SearchOptions {
     /// The rule every front end uses unless told otherwise.
-    pub const RECOMMENDED_RULE: &'static str = "peak-mean";
+    pub const RECOMMENDED_RULE: &'static str = "place-z";
     /// Its parameter.
-    pub const RECOMMENDED_PARAMETER: f64 = 1.6;
+    pub const RECOMMENDED_PARAMETER: f64 = 2.0;
+    /// Features voted before it is first consulted. `place-z` measures its
+    /// own evidence and would stop without one; the warm-up keeps enough
+    /// features for a geometric verification of the answer (12 inliers).
+    pub const RECOMMENDED_WARMUP: usize = 20;
     /// The place window distinctness is measured with (docs/results.md,
     /// "Distinctness").
     pub const PLACE_WINDOW: u32 = 2;
@@ -126,7 +130,7 @@ impl SearchOptions {
         Self {
             rule: RuleSpec::new(Self::RECOMMENDED_RULE, Some(Self::RECOMMENDED_PARAMETER))
                 .expect("a valid built-in rule"),
-            min_features: 20,
+            min_features: Self::RECOMMENDED_WARMUP,
             ..Self::default()
         }
     }

@@ -19,10 +19,10 @@ use crate::search::vote::{Needs, VoteStats};
 pub const INFO: RuleInfo = RuleInfo {
     name: "place-z",
     parameter: Some(Parameter {
-        name: "z",
+        name: "threshold",
         meaning: "z, the lead over the best image outside the leader's place in units of its spread √(Σv_leader² + Σv_other²)",
         range: Range::NonNegative,
-        example: 3.0,
+        example: 2.0,
     }),
     grid: Grid::Calibrated {
         lo: 1e-3,

@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# How the service's default stopping rule threshold is chosen: on one shared
+# dataset, the smallest threshold of a grid that loses at most 1 point of
+# recall@1 and of recall@5 against the full search on every vocabulary seed
+# (3 seeds × 3 feature orders, queries streamed in 2x2+24 tiles, the default
+# tile order); then the same threshold on the dataset kept aside. Prints, for
+# every threshold, the worst seed's loss on each dataset, the share of
+# features and the request time against the whole-image full search (mean
+# and median over seeds × queries × runs).
+#
+#   scripts/choose-default.sh [OUT]     (default OUT: data/eval/choose)
+#
+# Environment: RULE (default place-z), WARMUP (default 20), GRID (default
+# "1 1.25 1.5 1.75 2 2.25 2.5 3"), CHOOSE and ASIDE (NAME:WORDS; default
+# gardens-point:5000 and rtabmap-loop:1000).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=${1:-data/eval/choose}
+rule=${RULE:-place-z}
+warmup=${WARMUP:-20}
+grid=${GRID:-1 1.25 1.5 1.75 2 2.25 2.5 3}
+choose=${CHOOSE:-gardens-point:5000}
+aside=${ASIDE:-rtabmap-loop:1000}
+[ -x target/release/bowloc ] || cargo build --release
+sets=()
+for t in $grid; do sets+=(--set "$rule=$t@$warmup"); done
+for dataset in "$choose" "$aside"; do
+  name=${dataset%%:*}
+  ./target/release/bowloc --log warn eval --dataset "../shared/datasets/$name" --words "${dataset##*:}" \
+    --runs 3 --vocab-seeds 3 --rules none "${sets[@]}" --no-plots --out "$out/$name" >/dev/null
+done
+python3 - "$out/${choose%%:*}/results.json" "$out/${aside%%:*}/results.json" <<'PY'
+import json, sys
+
+def rows(path):
+    d = json.load(open(path))
+    full = next(s for s in d["settings"] if s["label"] == "none")
+    out = []
+    for s in d["settings"]:
+        if s["label"] == "none":
+            continue
+        loss = max(
+            100 * (f - r)
+            for key in ("recall_at_1", "recall_at_5")
+            for f, r in zip(full[key]["per_seed"], s[key]["per_seed"])
+        )
+        out.append((s["label"], loss, 100 * s["fraction"]["mean"],
+                    s["time_share_whole"]["mean"], s["time_share_whole"]["median"]))
+    return d["dataset"]["name"], out
+
+(chosen_on, a), (kept_aside, b) = rows(sys.argv[1]), rows(sys.argv[2])
+pick = next((r for r in a if r[1] <= 1.0 + 1e-9), None)
+for (label, loss, feat, mean, median), other in zip(a, b):
+    mark = "  <- chosen" if pick and label == pick[0] else ""
+    print(f"{label:22} {chosen_on}: worst-seed loss {loss:4.1f} points, features {feat:5.1f} %, "
+          f"x full {mean:.3f} / {median:.3f} | {kept_aside}: worst-seed loss {other[1]:4.1f}, "
+          f"features {other[2]:5.1f} %, x full {other[3]:.3f} / {other[4]:.3f}{mark}")
+if pick is None:
+    print(f"no threshold of the grid loses at most 1 point on {chosen_on}")
+PY
