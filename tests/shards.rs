@@ -41,7 +41,7 @@ fn sharded_search_answers_as_one_machine_on_real_images() {
     for setting in [
         "| none | 2 |",
         "| lossless | 8 |",
-        "| peak-mean 1.6 w=20 | 8 |",
+        "| place-z 2 w=20 | 8 |",
     ] {
         assert!(stdout.contains(setting), "{setting} missing:\n{stdout}");
     }
