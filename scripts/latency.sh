@@ -15,6 +15,8 @@
 # rtabmap-loop (K = 1000 map, 512×384 queries). EVERY: use every EVERY-th
 # query (default 10 for gardens-point: 20 images; 1 for rtabmap-loop: 44),
 # each sent 3 times. RULE-QUERY: extra query string, e.g. "rule=none".
+# LATENCY_PLAN: the configured extraction plan (search.tiles), e.g.
+# "2x2+24,auto"; default the configuration's default.
 # The server learns the coarse pass (`tiles = "…,auto"`) from the first
 # requests, as it does in service: every request counts.
 set -euo pipefail
@@ -30,7 +32,9 @@ every=${1:-$default_every}
 extra=${2:-}
 tmp=$(mktemp -d)
 trap 'stop_server; rm -rf "$tmp"' EXIT
-server_config 1 4 "$dir" >"$tmp/config.toml"
+plan=${LATENCY_PLAN:+[search]
+tiles = \"$LATENCY_PLAN\"}
+server_config 1 4 "$dir" "$plan" >"$tmp/config.toml"
 start_server "$tmp/config.toml" "$tmp/server.log"
 src=../shared/datasets/$name
 : >"$tmp/rows"

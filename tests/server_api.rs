@@ -529,15 +529,15 @@ async fn a_single_query_by_the_posterior_rule_weighs_votes_at_the_configured_kap
 }
 
 #[tokio::test]
-async fn the_default_plan_tries_the_coarse_pass_and_learns_which_costs_less() {
-    // loaded as the service loads it: the default configuration's plan
+async fn the_auto_plan_tries_the_coarse_pass_and_learns_which_costs_less() {
+    // loaded as the service loads it, with the learned plan
     let mut config = Config::default();
     let (v, m) = files();
     config.files.vocabulary = v.clone();
     config.files.map = m.clone();
     config.bootstrap.enabled = false;
     config.server.workers = 1;
-    assert!(config.search.tiles.ends_with(",auto"));
+    config.search.tiles = "2x2+24,auto".into();
     let localizer = bowloc::server::bootstrap::load(&config, &Default::default()).unwrap();
     let state = AppState::new(config).unwrap();
     state.set_localizer(localizer);

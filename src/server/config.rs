@@ -315,7 +315,7 @@ impl Default for SearchDefaults {
             tree_probes: 16,
             tiles: crate::features::TilePlan {
                 grid: crate::features::TileGrid::DEFAULT,
-                learn_coarse: true,
+                learn_coarse: false,
             }
             .to_string(),
             tile_order: o.tile_order,

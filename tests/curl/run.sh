@@ -163,8 +163,8 @@ check "answer reports features, rule, stop, seed, timings, map" jqt '
   and .map.name == "rtabmap-loop" and .map.images == 40 and .map.words == 1000
   and (.map.vocabulary | length) == 16 and .image.width == 512' "$B"
 cp "$B" "$TMP/first.json"
-# the extraction plan is learned (search.tiles ends in ,auto): the answer's
-# seed and tiles.grid replay it
+# the answer's seed and tiles.grid replay it (with a learned plan,
+# search.tiles ending in ,auto, the grid names the plan it chose)
 grid=$(jq -r '.tiles.grid | @uri' "$TMP/first.json")
 req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?top_n=3&seed=7&tiles=$grid" >/dev/null
 check "same seed and grid give the same candidates" test \
