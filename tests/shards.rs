@@ -38,11 +38,7 @@ fn sharded_search_answers_as_one_machine_on_real_images() {
         )),
         "{stdout}"
     );
-    for setting in [
-        "| none | 2 |",
-        "| lossless | 8 |",
-        "| place-z 2 w=20 | 8 |",
-    ] {
+    for setting in ["| none | 2 |", "| lossless | 8 |", "| place-z 2 w=20 | 8 |"] {
         assert!(stdout.contains(setting), "{setting} missing:\n{stdout}");
     }
 }

@@ -144,7 +144,11 @@ impl Report {
             _ => [0.0; 2],
         };
         let top_squares = if needs.squares {
-            voter.top().iter().map(|&(_, j)| voter.squares_of(j)).collect()
+            voter
+                .top()
+                .iter()
+                .map(|&(_, j)| voter.squares_of(j))
+                .collect()
         } else {
             Vec::new()
         };
@@ -166,7 +170,11 @@ impl Report {
     fn bytes(&self, needs: Needs) -> usize {
         8 * self.top.len()
             + 8
-            + if needs.squares { 8 + 4 * self.top.len() } else { 0 }
+            + if needs.squares {
+                8 + 4 * self.top.len()
+            } else {
+                0
+            }
             + 4 * self.outside.len()
     }
 }
