@@ -66,11 +66,11 @@ impl CoarseChoice {
             return match plain.samples.cmp(&coarse.samples) {
                 std::cmp::Ordering::Less => false,
                 std::cmp::Ordering::Greater => true,
-                std::cmp::Ordering::Equal => s.requests % 2 == 0,
+                std::cmp::Ordering::Equal => s.requests.is_multiple_of(2),
             };
         }
         let best = coarse.mean_ln_ms < plain.mean_ln_ms;
-        if s.requests % Self::EXPLORE_EVERY == 0 {
+        if s.requests.is_multiple_of(Self::EXPLORE_EVERY) {
             !best
         } else {
             best

@@ -43,10 +43,16 @@ pub fn distinctness(j: u32, h: f32, leaders: &[(f32, u32)], window: u32) -> f32 
 /// them lies outside. Exact when `leaders` holds at least 2·window + 2
 /// entries or every voted image: a place has at most 2·window + 1 images.
 pub fn elsewhere(j: u32, leaders: &[(f32, u32)], window: u32) -> f32 {
+    best_elsewhere(j, leaders, window).map_or(0.0, |e| e.0)
+}
+
+/// The best image outside `j`'s place among `leaders`, (h, id), as for
+/// [`elsewhere`]; `None` when none of them lies outside.
+pub fn best_elsewhere(j: u32, leaders: &[(f32, u32)], window: u32) -> Option<(f32, u32)> {
     leaders
         .iter()
         .find(|&&(_, k)| k.abs_diff(j) > window)
-        .map_or(0.0, |e| e.0)
+        .copied()
 }
 
 /// The `count` highest (h, id) of `ids` (ties by lower id), best first.

@@ -253,7 +253,7 @@ mod tests {
     #[test]
     fn unknown_words_and_other_widths_sign_zero() {
         let d = gaussian(50, 8, 5);
-        let he = HammingEmbedding::train(d.view(), &vec![0; 50], 1, 1);
+        let he = HammingEmbedding::train(d.view(), &[0; 50], 1, 1);
         let mut s = [7u64; 2];
         he.sign(d.slice(ndarray::s![0..2, ..]), &[5, 9], &mut s);
         assert_eq!(s, [0, 0]);

@@ -14,6 +14,7 @@
 //! cannot. It needs no N.
 
 use super::{Grid, Parameter, Range, RuleContext, RuleInfo, StopRule};
+use crate::search::rank::best_elsewhere;
 use crate::search::vote::{Needs, VoteStats};
 
 pub const INFO: RuleInfo = RuleInfo {
@@ -67,10 +68,8 @@ impl StopRule for PlaceZ {
     fn statistic(&self, voter: &dyn VoteStats) -> Option<(f64, f64)> {
         let top = voter.top();
         let &(h, j) = top.first()?;
-        let (h_k, q_k) = top
-            .iter()
-            .find(|&&(_, k)| k.abs_diff(j) > self.window)
-            .map_or((0.0, 0.0), |&(h_k, k)| (h_k, voter.squares_of(k)));
+        let (h_k, q_k) = best_elsewhere(j, top, self.window)
+            .map_or((0.0, 0.0), |(h_k, k)| (h_k, voter.squares_of(k)));
         let spread = (voter.squares_of(j) as f64 + q_k as f64).sqrt();
         if spread <= 0.0 {
             return None;
