@@ -36,7 +36,7 @@ pub struct CalibrateArgs {
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "peak-mean,relative,stable-peak,confident"
+        default_value = "place-z,peak-mean,relative,stable-peak,confident"
     )]
     rules: Vec<String>,
     /// Warm-up: features voted before the rule is consulted (default: adapted to
