@@ -9,9 +9,12 @@
 //! spread, a self-normalised statistic: it does not change when every vote
 //! is scaled (the map's idf, its size, the Hamming weights), and a query
 //! with few features must lead by more per feature to reach the same z as
-//! one with many. So the same z asks the same confidence of any map and any
-//! query, which a threshold on summed votes (`place-lead`, `peak-mean`)
-//! cannot. It needs no N.
+//! one with many. So the same z asks about the same confidence of any map
+//! and any query, which a threshold on summed votes (`place-lead`,
+//! `peak-mean`) cannot. It needs no N. The spread assumes the features come
+//! in a random order; a tile's or a coarse pass's features are not a random
+//! sample of the image, and a stop on the coarse pass alone is bolder than
+//! z says (docs/results.md, "The learned plan").
 
 use super::{Grid, Parameter, Range, RuleContext, RuleInfo, StopRule};
 use crate::search::rank::best_elsewhere;
