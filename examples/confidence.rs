@@ -14,26 +14,39 @@
 //! It reads (or fills) the eval's caches in `data/eval-cache/<dataset>`.
 
 use bowloc::eval::cache;
+use bowloc::eval::metrics::{self, Answer};
 use bowloc::features::TileGrid;
 use bowloc::pipeline::code;
+use bowloc::search::rank::distinctness;
 use bowloc::search::stop::RuleContext;
-use bowloc::search::{HammingWeights, Needs, RuleSpec, SearchOptions, VoteStats, Voter};
+use bowloc::search::{HammingWeights, Needs, Ranked, RuleSpec, SearchOptions, VoteStats, Voter};
+use std::collections::HashSet;
 
-/// Recall of the top answer at 90 % precision when the answers are kept in
-/// order of `confidence` (highest first): the most correct answers any
-/// cut keeps at a precision of at least 0.9, over the queries with a match.
-fn recall_at_90(answers: &[(f64, bool)], with_match: usize) -> f64 {
-    let mut sorted = answers.to_vec();
-    sorted.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let (mut kept, mut right, mut best) = (0usize, 0usize, 0usize);
-    for (_, correct) in sorted {
-        kept += 1;
-        right += usize::from(correct);
-        if right as f64 >= 0.9 * kept as f64 {
-            best = best.max(right);
-        }
-    }
-    best as f64 / with_match as f64
+/// A query's top candidate, its distinctness and place-z's statistic.
+type Top = (u32, f64, f64);
+
+/// Recall of the top answer at 90 % precision when each query's top
+/// candidate (`None`: no answer) is scored by a confidence, as the eval
+/// measures it ([`metrics::recall_at_precision`]).
+fn recall_at_90(tops: &[Option<(u32, f64)>], truth: &[HashSet<u32>]) -> f64 {
+    let ranked: Vec<Vec<Ranked>> = tops
+        .iter()
+        .map(|top| {
+            top.iter()
+                .map(|&(id, confidence)| Ranked {
+                    id,
+                    score: confidence as f32,
+                    distinct: 0.0,
+                })
+                .collect()
+        })
+        .collect();
+    let answers: Vec<Answer<'_>> = ranked
+        .iter()
+        .zip(truth)
+        .map(|(candidates, truth)| Answer { candidates, truth })
+        .collect();
+    metrics::recall_at_precision(&answers, 1, 0.9).recall
 }
 
 fn main() -> anyhow::Result<()> {
@@ -54,50 +67,52 @@ fn main() -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)?
         .build(&context);
     let view = map.view();
-    let (mut by_distinct, mut by_z) = (Vec::new(), Vec::new());
-    let mut by_rank = Vec::new();
-    let with_match = dataset.truth.iter().filter(|t| !t.is_empty()).count();
-    for q in 0..queries.len() {
-        if dataset.truth[q].is_empty() {
-            continue;
-        }
-        let Some(d) = queries.image(q) else {
-            continue;
-        };
-        let coded = code(&vocab, d);
-        let needs = Needs {
-            top: 2 * window as usize + 2,
-            squares: true,
-            ..Needs::default()
-        };
-        let mut voter = Voter::with_needs(&view, needs).with_hamming(&map, HammingWeights::DEFAULT);
-        for (&w, &s) in coded.words.iter().zip(&coded.signatures) {
-            voter.vote(w, s);
-        }
-        let Some(&(h, top)) = voter.top().first() else {
-            continue;
-        };
-        let correct = dataset.truth[q].contains(&top);
-        let elsewhere = bowloc::search::rank::elsewhere(top, voter.top(), window);
-        by_distinct.push(((h / (h + elsewhere)) as f64, correct));
-        let z = z_rule.statistic(&voter).map_or(0.0, |s| s.0);
-        by_z.push((z, correct));
-    }
-    // both, by the lower of the two ranks (each a share of the queries)
-    let ranks = |v: &[(f64, bool)]| -> Vec<f64> {
-        let mut idx: Vec<usize> = (0..v.len()).collect();
-        idx.sort_by(|&a, &b| v[a].0.total_cmp(&v[b].0));
-        let mut r = vec![0.0; v.len()];
-        for (k, &i) in idx.iter().enumerate() {
-            r[i] = k as f64 / v.len() as f64;
+    let needs = Needs {
+        top: 2 * window as usize + 2,
+        squares: true,
+        ..Needs::default()
+    };
+    // per query: its top candidate with its distinctness and z
+    let tops: Vec<Option<Top>> = (0..queries.len())
+        .map(|q| {
+            let coded = code(&vocab, queries.image(q)?);
+            let mut voter =
+                Voter::with_needs(&view, needs).with_hamming(&map, HammingWeights::DEFAULT);
+            for (&w, &s) in coded.words.iter().zip(&coded.signatures) {
+                voter.vote(w, s);
+            }
+            let &(h, top) = voter.top().first()?;
+            let distinct = distinctness(top, h, voter.top(), window) as f64;
+            let z = z_rule.statistic(&voter).map_or(0.0, |s| s.0);
+            Some((top, distinct, z))
+        })
+        .collect();
+    // each confidence's rank, a share of the queries with an answer
+    let ranks = |confidence: fn(&Top) -> f64| -> Vec<f64> {
+        let mut order: Vec<usize> = (0..tops.len()).filter(|&q| tops[q].is_some()).collect();
+        order.sort_by(|&a, &b| {
+            let c = |q: usize| tops[q].as_ref().map_or(0.0, confidence);
+            c(a).total_cmp(&c(b))
+        });
+        let mut r = vec![0.0; tops.len()];
+        for (k, &q) in order.iter().enumerate() {
+            r[q] = k as f64 / order.len() as f64;
         }
         r
     };
-    let (rd, rz) = (ranks(&by_distinct), ranks(&by_z));
-    for i in 0..by_z.len() {
-        by_rank.push((rd[i].min(rz[i]), by_z[i].1));
-    }
-    let right = by_z.iter().filter(|a| a.1).count();
+    let (rank_d, rank_z) = (ranks(|t| t.1), ranks(|t| t.2));
+    let scored = |confidence: &dyn Fn(usize, &Top) -> f64| -> Vec<Option<(u32, f64)>> {
+        tops.iter()
+            .enumerate()
+            .map(|(q, t)| t.as_ref().map(|t| (t.0, confidence(q, t))))
+            .collect()
+    };
+    let with_match = dataset.truth.iter().filter(|t| !t.is_empty()).count();
+    let right = tops
+        .iter()
+        .zip(&dataset.truth)
+        .filter(|(t, truth)| t.is_some_and(|t| truth.contains(&t.0)))
+        .count();
     println!(
         "{}: K = {}, vocabulary seed {}; full search, whole queries: recall@1 {:.1} %",
         dataset.name,
@@ -107,9 +122,9 @@ fn main() -> anyhow::Result<()> {
     );
     println!(
         "top-1 recall at 90 % precision: by distinctness {:.1} %, by place-z's statistic {:.1} %, by the lower rank of the two {:.1} %",
-        100.0 * recall_at_90(&by_distinct, with_match),
-        100.0 * recall_at_90(&by_z, with_match),
-        100.0 * recall_at_90(&by_rank, with_match)
+        100.0 * recall_at_90(&scored(&|_, t| t.1), &dataset.truth),
+        100.0 * recall_at_90(&scored(&|_, t| t.2), &dataset.truth),
+        100.0 * recall_at_90(&scored(&|q, _| rank_d[q].min(rank_z[q])), &dataset.truth)
     );
     Ok(())
 }
