@@ -30,26 +30,34 @@ fn measure(dataset: &str, words: usize, rules: &[RuleSpec]) -> Vec<Agreement> {
     } = common::real_map(dataset, words);
     let queries = words_per_image(&vocab, &queries);
     let recommended = SearchOptions::recommended();
+    let options = |rule: RuleSpec, seed: u64| SearchOptions {
+        rule,
+        top_n: 1,
+        seed,
+        ..recommended.clone()
+    };
+    // the full search's top-1 of each query, once (it reads every feature,
+    // so the feature order does not change it)
+    let none = RuleSpec::new("none", None).unwrap();
+    let full: Vec<Option<u32>> = queries
+        .iter()
+        .map(|words| {
+            let o = search_words(&map, words.known(), &options(none.clone(), 0));
+            o.candidates.first().map(|c| c.id)
+        })
+        .collect();
     rules
         .iter()
         .map(|rule| {
             let (mut agree, mut pairs, mut used, mut total) = (0usize, 0usize, 0usize, 0usize);
             for seed in 0..SEEDS {
-                for words in &queries {
-                    let options = |rule: RuleSpec| SearchOptions {
-                        rule,
-                        top_n: 1,
-                        seed,
-                        ..recommended.clone()
-                    };
-                    let none = RuleSpec::new("none", None).unwrap();
-                    let full = search_words(&map, words.known(), &options(none));
-                    let Some(best) = full.candidates.first() else {
+                for (words, &best) in queries.iter().zip(&full) {
+                    let Some(best) = best else {
                         continue;
                     };
-                    let early = search_words(&map, words.known(), &options(rule.clone()));
+                    let early = search_words(&map, words.known(), &options(rule.clone(), seed));
                     pairs += 1;
-                    agree += usize::from(early.candidates.first().map(|c| c.id) == Some(best.id));
+                    agree += usize::from(early.candidates.first().map(|c| c.id) == Some(best));
                     used += early.features_used;
                     total += early.features_total;
                 }
