@@ -482,7 +482,14 @@ impl Localizer {
     ) -> Localization {
         let started = Instant::now();
         let votes: Vec<(u32, f32)> = answer.candidates.iter().map(|c| (c.id, c.score)).collect();
-        let reranked = rerank(map, &votes, query, &self.fit, &self.verify);
+        let reranked = rerank(
+            map,
+            &votes,
+            query,
+            &self.fit,
+            &self.verify,
+            options.place_window,
+        );
         let mut answer = answer.verified(
             map,
             &reranked,

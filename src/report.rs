@@ -254,8 +254,10 @@ pub struct Candidate {
     pub id: u32,
     pub name: String,
     /// Without verification: the estimated full bag-of-words tf-idf score.
-    /// With verification: the inlier count (0 for a candidate beyond the
-    /// verified top k). Either way comparable across queries.
+    /// With verification: the inlier count of its place, its own plus its
+    /// checked neighbours' (`verify.order = "place"`, the default), or its
+    /// own (0 for a candidate beyond the verified top k). Either way
+    /// comparable across queries.
     pub score: f32,
     /// Its votes h against the best image outside its place (the images
     /// within `search.place_window` along the map's order):

@@ -291,7 +291,7 @@ mod tests {
 #[derive(Args, Debug, Clone)]
 pub struct VerifyArgs {
     /// Verify the top vote candidates geometrically and re-rank them by
-    /// inliers (the score becomes the inlier count).
+    /// inliers (the score becomes an inlier count, see --verify-order).
     #[arg(long)]
     pub verify: bool,
     /// Vote candidates verified.
@@ -307,9 +307,11 @@ pub struct VerifyArgs {
     /// in at most this many bits (64: every pair).
     #[arg(long, default_value_t = VerifyParams::default().max_hamming)]
     pub max_hamming: u32,
-    /// Order of the verified candidates: inliers (most first) or verified
-    /// (those with at least --min-inliers first, each group in vote order).
-    #[arg(long, default_value = "inliers")]
+    /// Order of the verified candidates: inliers (most first), verified
+    /// (those with at least --min-inliers first, each group in vote order) or
+    /// place (by the inliers of the candidate and its checked neighbours
+    /// within the place window, most first).
+    #[arg(long, default_value = "place")]
     pub verify_order: Order,
     /// Geometric model: homography or fundamental.
     #[arg(long, default_value = "homography")]

@@ -189,6 +189,7 @@ impl Query {
                 &with_keypoints(&voted, &fed_keypoints),
                 &*g.fit,
                 &g.params,
+                options.place_window,
             );
             verified = reranked
                 .first()

@@ -123,13 +123,19 @@ pub fn markdown(report: &VerificationReport) -> String {
     let mut out = format!(
         "## Geometric verification\n\n\
          The top {} vote candidates of each answer verified ({:?}, {:?}, inlier threshold {} px, \
-         words giving more than {} pairs skipped) and re-ranked by inliers; the score is then \
-         the inlier count. A candidate is verified with at least {} inliers. Recalls in %, on \
+         words giving more than {} pairs skipped) and re-ranked by inliers (order `{}`); the \
+         score is then an inlier count. A candidate is verified with at least {} inliers. Recalls in %, on \
          the first vocabulary, mean ± standard deviation over runs; verification time per \
          query in ms.\n\n\
          | setting | verify | recall@1 | recall@5 | recall top-1 @90% P | recall top-1 @90% P by distinctness | recall top-5 @90% P | verify ms median | p95 | top verified | verified top correct |\n\
          | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
-        p.top_k, p.model, p.estimator, p.threshold_px, p.max_word_pairs, p.min_inliers
+        p.top_k,
+        p.model,
+        p.estimator,
+        p.threshold_px,
+        p.max_word_pairs,
+        p.order.name(),
+        p.min_inliers
     );
     for r in &report.rows {
         for (name, x) in [("no", &r.without), ("yes", &r.with)] {

@@ -43,16 +43,34 @@ pub enum Order {
     /// others, each group in vote order: a vote leader that verifies stays
     /// first, and one that does not gives way to the best-voted one that does.
     Verified,
+    /// By the inliers of the candidate's place: its own plus those of the
+    /// other checked candidates within the place window along the map's
+    /// order (most first; equal sums by the candidate's own inliers, then in
+    /// vote order). Neighbouring map images
+    /// see the same place, so their inliers add up to evidence for it where
+    /// one image's inliers are few (docs/results.md, "Place inliers").
+    Place,
+}
+
+impl Order {
+    pub const ALL: [Order; 3] = [Order::Inliers, Order::Verified, Order::Place];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Inliers => "inliers",
+            Self::Verified => "verified",
+            Self::Place => "place",
+        }
+    }
 }
 
 impl std::str::FromStr for Order {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "inliers" => Ok(Self::Inliers),
-            "verified" => Ok(Self::Verified),
-            _ => Err(format!("unknown order `{s}`; use inliers or verified")),
-        }
+        Self::ALL
+            .into_iter()
+            .find(|o| o.name() == s)
+            .ok_or_else(|| format!("unknown order `{s}`; use inliers, verified or place"))
     }
 }
 
@@ -154,7 +172,7 @@ impl Default for VerifyParams {
             min_inliers: 12,
             max_word_pairs: 4,
             max_hamming: 16,
-            order: Order::Inliers,
+            order: Order::Place,
             model: Model::Homography,
             estimator: Estimator::Magsac,
             threshold_px: 8.0,
@@ -380,6 +398,9 @@ pub struct Reranked {
     pub id: u32,
     /// The vote score it had.
     pub votes: f32,
+    /// Its score after verification: its inliers, or with [`Order::Place`]
+    /// its place's (0 when not checked).
+    pub score: f32,
     /// `None` beyond the top k (not verified).
     pub verification: Option<Verification>,
     /// The pairs the fit took as inliers (empty unless it verified some).
@@ -387,21 +408,29 @@ pub struct Reranked {
 }
 
 impl Reranked {
-    /// The score of a verified answer: the inlier count (0 when not checked).
+    /// The score of a verified answer: the inlier count, or the place's
+    /// (0 when not checked).
     pub fn score(&self) -> f32 {
-        self.verification.map_or(0.0, |v| v.inliers as f32)
+        self.score
+    }
+
+    fn inliers(&self) -> usize {
+        self.verification.map_or(0, |v| v.inliers)
     }
 }
 
 /// Verify the first `params.top_k` of `candidates` (id, vote score; best
-/// first) and order them by inliers, ties kept in vote order; candidates
-/// beyond the top k follow in vote order.
+/// first) and order them as `params.order` says, ties kept in vote order;
+/// candidates beyond the top k follow in vote order. `place_window`: the
+/// images on each side of an image, along the map's order, that belong to
+/// its place ([`Order::Place`]).
 pub fn rerank(
     map: &dyn MapRead,
     candidates: &[(u32, f32)],
     query: &[QueryFeature],
     fit: &dyn ModelFit,
     params: &VerifyParams,
+    place_window: u32,
 ) -> Vec<Reranked> {
     let query = QueryFeatures::new(query);
     let k = params.top_k.min(candidates.len());
@@ -418,6 +447,7 @@ pub fn rerank(
             Reranked {
                 id,
                 votes,
+                score: verification.map_or(0.0, |v| v.inliers as f32),
                 verification,
                 inlier_pairs,
             }
@@ -425,10 +455,30 @@ pub fn rerank(
         .collect();
     // stable: equal keys keep vote order
     match params.order {
-        Order::Inliers => {
-            out[..k].sort_by_key(|r| std::cmp::Reverse(r.verification.map_or(0, |v| v.inliers)))
-        }
+        Order::Inliers => out[..k].sort_by_key(|r| std::cmp::Reverse(r.inliers())),
         Order::Verified => out[..k].sort_by_key(|r| !r.verification.is_some_and(|v| v.verified)),
+        Order::Place => {
+            let place: Vec<usize> = out[..k]
+                .iter()
+                .map(|r| {
+                    out[..k]
+                        .iter()
+                        .filter(|o| o.id.abs_diff(r.id) <= place_window)
+                        .map(Reranked::inliers)
+                        .sum()
+                })
+                .collect();
+            for (r, &p) in out[..k].iter_mut().zip(&place) {
+                r.score = p as f32;
+            }
+            // neighbours often share a sum: the one with more inliers of
+            // its own first
+            out[..k].sort_by(|a, b| {
+                b.score
+                    .total_cmp(&a.score)
+                    .then(b.inliers().cmp(&a.inliers()))
+            });
+        }
     }
     out
 }
@@ -507,6 +557,7 @@ mod tests {
             &query,
             &fit,
             &VerifyParams::default(),
+            2,
         );
         assert_eq!(out[0].id, 0, "the image with inliers is ranked first");
         let v = out[0].verification.unwrap();
@@ -514,6 +565,50 @@ mod tests {
         assert_eq!(out[0].inlier_pairs.len(), v.inliers);
         assert_eq!(out[1].verification.unwrap().inliers, 0);
         assert!(out[1].inlier_pairs.is_empty());
+    }
+
+    #[test]
+    fn the_place_order_adds_up_the_inliers_of_neighbouring_images() {
+        use crate::index::{ImageWords, MapBuilder};
+        let kp = |i: u32| Keypoint {
+            x: (i % 5) as f32 * 17.0 + 3.0,
+            y: (i / 5) as f32 * 13.0 + 5.0,
+            size: 4.0,
+            angle: 0.0,
+            response: 1.0,
+        };
+        // along the map's order: images 0 and 1 share 14 and 13 words with
+        // the query, 2 and 3 none, image 4 shares 20
+        let shared: [std::ops::Range<u32>; 5] = [0..14, 14..27, 60..61, 61..62, 27..47];
+        let mut b = MapBuilder::new(64);
+        for (j, words) in shared.iter().enumerate() {
+            let words: Vec<u32> = words.clone().collect();
+            let kps: Vec<Keypoint> = words.iter().map(|&w| kp(w)).collect();
+            b.add(ImageWords::with_geometry(format!("{j}"), &words, &[], &kps));
+        }
+        let map = b.build("m", "v", None);
+        let query: Vec<QueryFeature> = (0..47).map(|w| (w, kp(w)).into()).collect();
+        let fit = AllInliers(VerifyParams::default().fit());
+        let votes = [(4, 0.9), (1, 0.5), (0, 0.4)];
+        let ranked = |order: Order, window: u32| -> Vec<(u32, f32)> {
+            let params = VerifyParams {
+                order,
+                ..Default::default()
+            };
+            rerank(&map, &votes, &query, &fit, &params, window)
+                .iter()
+                .map(|r| (r.id, r.score()))
+                .collect()
+        };
+        assert_eq!(ranked(Order::Inliers, 2), [(4, 20.0), (0, 14.0), (1, 13.0)]);
+        // images 0 and 1 are one place: 14 + 13 inliers; of two equal sums
+        // the image with more inliers of its own comes first
+        assert_eq!(ranked(Order::Place, 2), [(0, 27.0), (1, 27.0), (4, 20.0)]);
+        // a window of 0 makes every image its own place
+        assert_eq!(ranked(Order::Place, 0), [(4, 20.0), (0, 14.0), (1, 13.0)]);
+        // image 4 is 3 images from image 1: their places overlap with a
+        // window of 3
+        assert_eq!(ranked(Order::Place, 3), [(1, 47.0), (4, 33.0), (0, 27.0)]);
     }
 
     #[test]

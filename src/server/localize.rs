@@ -73,7 +73,8 @@ pub struct LocalizeParams {
     pub tile_order: Option<String>,
     /// Verify the top vote candidates geometrically and re-rank them by
     /// inliers (`true` or `false`; default from the `[verify]` section).
-    /// With verification the score is the inlier count.
+    /// With verification the score is an inlier count: by default the
+    /// inliers of the candidate's place (its own and its checked neighbours').
     #[param(value_type = Option<bool>)]
     pub verify: Option<String>,
     /// Return the vote race in `trace` (`true`): the leader's and the

@@ -1,0 +1,109 @@
+//! What a streamed query looks like at the end of each tile: for one
+//! vocabulary seed and three feature orders, every query's tiles are voted in
+//! the service's order (`2x2+24` or the grid given, richest first, Hamming weights) and, after
+//! each tile, one CSV row says whether the top-1 and the top-5 so far hold a
+//! true match, place-z's statistic, whether that tile's own votes (taken
+//! alone) lead in the same place as all the votes so far, and the share of the
+//! whole image's decode and extraction time spent up to then. A rule that
+//! stops at tile ends can be tried on these rows without a new search.
+//!
+//! ```sh
+//! cargo run --release --example tile_ends -- ../shared/datasets/gardens-point 5000 1 [GRID] > ends.csv
+//! ```
+//!
+//! It reads (or fills) the eval's caches in `data/eval-cache/<dataset>`.
+
+use bowloc::eval::cache;
+use bowloc::eval::sweep::seed;
+use bowloc::features::TileGrid;
+use bowloc::pipeline::code;
+use bowloc::search::rank::top_n;
+use bowloc::search::stop::RuleContext;
+use bowloc::search::{HammingWeights, Needs, RuleSpec, SearchOptions, TileOrder, VoteStats, Voter};
+
+const RUNS: u32 = 3;
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let grid: TileGrid = match args.get(4) {
+        Some(g) => g.parse().map_err(anyhow::Error::msg)?,
+        None => TileGrid::DEFAULT,
+    };
+    let whole = cache::prepare_from_args(&args, TileGrid::WHOLE)?;
+    let cache::Prepared {
+        dataset,
+        queries,
+        vocab,
+        map,
+        ..
+    } = cache::prepare_from_args(&args, grid)?;
+    let window = SearchOptions::PLACE_WINDOW;
+    let context = RuleContext {
+        place_window: window,
+        ..RuleContext::default()
+    };
+    let z_rule = RuleSpec::new("place-z", Some(2.0))
+        .map_err(anyhow::Error::msg)?
+        .build(&context);
+    let view = map.view();
+    let needs = Needs {
+        top: 2 * window as usize + 2,
+        squares: true,
+        ..Needs::default()
+    };
+    let same_place = |a: u32, b: u32| a.abs_diff(b) <= window;
+    println!(
+        "seed,run,query,tile,tiles,time_share,top1,top5,z,tile_agrees,tile_leader_z,leader,tile_leader,features,total"
+    );
+    for q in 0..queries.len() {
+        let truth = &dataset.truth[q];
+        if truth.is_empty() {
+            continue;
+        }
+        let Some(descriptors) = queries.image(q) else {
+            continue;
+        };
+        let coded = code(&vocab, descriptors);
+        let query = queries.query(q, coded.words.clone(), coded.signatures.clone());
+        let whole_ms = whole.queries.extract_ms(q);
+        for run in 0..RUNS {
+            let (order, spans) = query.tile_order(seed(run, q), TileOrder::Richest);
+            let mut voter =
+                Voter::with_needs(&view, needs).with_hamming(&map, HammingWeights::DEFAULT);
+            let mut spent = query.fixed_ms as f64;
+            for (k, (&t, &(a, b, _))) in order.iter().zip(&spans).enumerate() {
+                let mut alone =
+                    Voter::with_needs(&view, needs).with_hamming(&map, HammingWeights::DEFAULT);
+                for i in a..b {
+                    voter.vote(coded.words[i], coded.signatures[i]);
+                    alone.vote(coded.words[i], coded.signatures[i]);
+                }
+                spent += query.tiles.get(t).map_or(0.0, |t| t.ms as f64);
+                let top = top_n(&voter, 5, 0.0, None, window);
+                let top1 = top.first().is_some_and(|r| truth.contains(&r.id));
+                let top5 = top.iter().any(|r| truth.contains(&r.id));
+                let z = z_rule.statistic(&voter).map_or(0.0, |s| s.0);
+                let alone_z = z_rule.statistic(&alone).map_or(0.0, |s| s.0);
+                let agrees = match (voter.tally().leader, alone.tally().leader) {
+                    (Some(l), Some(m)) => same_place(l, m),
+                    _ => false,
+                };
+                println!(
+                    "{},{run},{q},{},{},{:.4},{},{},{z:.4},{},{alone_z:.4},{},{},{},{}",
+                    vocab.meta().seed,
+                    k + 1,
+                    order.len(),
+                    spent / whole_ms,
+                    u8::from(top1),
+                    u8::from(top5),
+                    u8::from(agrees),
+                    voter.tally().leader.map_or(-1, i64::from),
+                    alone.tally().leader.map_or(-1, i64::from),
+                    voter.tally().features,
+                    coded.words.len(),
+                );
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,100 @@
+#!/usr/bin/env bash
+# What a stopping rule that decides at tile ends can reach: runs
+# examples/tile_ends.rs (every query's state after each of its 2x2+24 tiles:
+# top-1 and top-5 right or not, place-z's statistic, decode and extraction
+# time so far against the whole image's) for vocabulary seeds 1 to 3 on both
+# shared datasets, then prints, for stops at tile ends only, the worst seed's
+# loss of recall@1 / recall@5 against the full search and the median and mean
+# time share:
+#   - place-z thresholds z;
+#   - a "predictive" z, z·√(t/R) (t features voted, R left): how many spreads
+#     the lead is of what the features left could still move it;
+#   - the best per-tile-end thresholds of a grid, chosen in hindsight on
+#     gardens-point (an upper bound for any z schedule), and the same on
+#     rtabmap-loop;
+#   - the oracle that stops at the first tile end whose answer is as good as
+#     the full search's (a bound for any rule);
+#   - how often the answer after two tiles is worse than the full search's,
+#     and how well z and other statistics rank those cases (AUC).
+#
+#   scripts/tile-ends.sh [OUT]     (default OUT: data/eval/tile-ends)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=${1:-data/eval/tile-ends}
+mkdir -p "$out"
+cargo build --release --example tile_ends >/dev/null 2>&1
+for seed in 1 2 3; do
+  ./target/release/examples/tile_ends ../shared/datasets/gardens-point 5000 $seed >"$out/gardens-point-$seed.csv" 2>/dev/null
+  ./target/release/examples/tile_ends ../shared/datasets/rtabmap-loop 1000 $seed >"$out/rtabmap-loop-$seed.csv" 2>/dev/null
+done
+python3 - "$out" <<'PY'
+import bisect, collections, csv, itertools, math, statistics, sys
+
+out = sys.argv[1]
+
+def load(name):
+    rows = collections.defaultdict(list)
+    for seed in (1, 2, 3):
+        for r in csv.DictReader(open(f"{out}/{name}-{seed}.csv")):
+            rows[(r["seed"], r["run"], r["query"])].append({k: float(v) for k, v in r.items()})
+    return rows
+
+def evaluate(rows, stop):
+    per_seed = collections.defaultdict(lambda: [0, 0, 0, 0, 0])
+    times = []
+    for key, ends in rows.items():
+        k = next((i for i in range(len(ends) - 1) if stop(ends, i)), len(ends) - 1)
+        e, f = ends[k], ends[-1]
+        d = per_seed[key[0]]
+        d[0] += f["top1"]; d[1] += e["top1"]; d[2] += f["top5"]; d[3] += e["top5"]; d[4] += 1
+        times.append(e["time_share"])
+    loss = max(max(d[0] - d[1], d[2] - d[3]) * 100 / d[4] for d in per_seed.values())
+    return loss, statistics.median(times), statistics.mean(times)
+
+def show(label, a, b):
+    print(f"{label:34} gardens-point: loss {a[0]:4.1f}, time {a[1]:.3f} / {a[2]:.3f} | "
+          f"rtabmap-loop: loss {b[0]:4.1f}, time {b[1]:.3f} / {b[2]:.3f}")
+
+gp, rt = load("gardens-point"), load("rtabmap-loop")
+both = lambda stop: (evaluate(gp, stop), evaluate(rt, stop))
+print("stops at tile ends only; loss: worst seed, points of recall@1 or recall@5; "
+      "time: median / mean share of the whole image's decode + extraction")
+show("full search (all four tiles)", *both(lambda e, i: False))
+for z in (1, 1.5, 2, 2.5, 3):
+    show(f"place-z {z}", *both(lambda e, i, z=z: e[i]["z"] > z))
+def predictive(e, i):
+    s = e[i]["features"] / max(e[i]["total"], 1)
+    return e[i]["z"] * math.sqrt(s / (1 - s)) if s < 1 else math.inf
+for z in (1.5, 2, 3, 3.5, 4):
+    show(f"predictive z {z}", *both(lambda e, i, z=z: predictive(e, i) > z))
+grid = [1, 1.25, 1.5, 1.75, 2, 2.5, 3, 4, math.inf]
+best = min(
+    (evaluate(gp, lambda e, i, t=t: e[i]["z"] > t[i])[1], t)
+    for t in itertools.product(grid, repeat=3)
+    if evaluate(gp, lambda e, i, t=t: e[i]["z"] > t[i])[0] <= 1.0
+)[1]
+show(f"best z per tile end {best}", *both(lambda e, i: e[i]["z"] > best[i]))
+show("oracle", *both(lambda e, i: e[i]["top1"] >= e[-1]["top1"] and e[i]["top5"] >= e[-1]["top5"]))
+def auc(good, bad):
+    """How often a search that answers as well as the full search scores above one that does not."""
+    good = sorted(good)
+    below = sum(bisect.bisect_left(good, v) + 0.5 * (bisect.bisect_right(good, v) - bisect.bisect_left(good, v))
+                for v in bad)
+    return 1 - below / len(bad) / len(good)
+statistics_at_two = {
+    "z": lambda e, p: e["z"],
+    "the tile's own votes lead in the same place": lambda e, p: e["tile_agrees"],
+    "z of the tile's votes alone": lambda e, p: e["tile_leader_z"],
+    "the leader kept its place from the tile before": lambda e, p: float(abs(e["leader"] - p["leader"]) <= 2),
+    "z's growth from the tile before": lambda e, p: e["z"] - p["z"],
+}
+worse = [ends for ends in gp.values()
+         if ends[-1]["top1"] > ends[1]["top1"] or ends[-1]["top5"] > ends[1]["top5"]]
+print(f"gardens-point after two tiles: {len(worse)} of {len(gp)} searches answer worse than the full search; "
+      "AUC of each statistic against them:")
+for name, f in statistics_at_two.items():
+    good = [f(ends[1], ends[0]) for ends in gp.values()
+            if not (ends[-1]["top1"] > ends[1]["top1"] or ends[-1]["top5"] > ends[1]["top5"])]
+    bad = [f(ends[1], ends[0]) for ends in worse]
+    print(f"  {name}: {auc(good, bad):.3f}")
+PY
