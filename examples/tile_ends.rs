@@ -3,8 +3,10 @@
 //! the service's order (`2x2+24` or the grid given, richest first, Hamming weights) and, after
 //! each tile, one CSV row says whether the top-1 and the top-5 so far hold a
 //! true match, place-z's statistic, whether that tile's own votes (taken
-//! alone) lead in the same place as all the votes so far, and the share of the
-//! whole image's decode and extraction time spent up to then. A rule that
+//! alone) lead in the same place as all the votes so far, the share of the
+//! whole image's decode and extraction time spent up to then, and the
+//! leader's inliers and its place's (verified as the service verifies,
+//! against the features voted so far). A rule that
 //! stops at tile ends can be tried on these rows without a new search.
 //!
 //! ```sh
@@ -16,10 +18,14 @@
 use bowloc::eval::cache;
 use bowloc::eval::sweep::seed;
 use bowloc::features::TileGrid;
+use bowloc::features::fit::OpenCvFit;
+use bowloc::geometry::verify::{VerifyParams, verify_leader, with_keypoints};
 use bowloc::pipeline::code;
 use bowloc::search::rank::top_n;
 use bowloc::search::stop::RuleContext;
-use bowloc::search::{HammingWeights, Needs, RuleSpec, SearchOptions, TileOrder, VoteStats, Voter};
+use bowloc::search::{
+    HammingWeights, Needs, RuleSpec, SearchOptions, TileOrder, VoteStats, Voted, Voter,
+};
 
 const RUNS: u32 = 3;
 
@@ -52,8 +58,12 @@ fn main() -> anyhow::Result<()> {
         ..Needs::default()
     };
     let same_place = |a: u32, b: u32| a.abs_diff(b) <= window;
+    bowloc::features::set_opencv_threads(1);
+    let verify = VerifyParams::default();
+    let fit = OpenCvFit::new(verify.fit());
+    let images = map.images() as u32;
     println!(
-        "seed,run,query,tile,tiles,time_share,top1,top5,z,tile_agrees,tile_leader_z,leader,tile_leader,features,total"
+        "seed,run,query,tile,tiles,time_share,top1,top5,z,tile_agrees,tile_leader_z,leader,tile_leader,features,total,leader_inliers,place_inliers"
     );
     for q in 0..queries.len() {
         let truth = &dataset.truth[q];
@@ -71,13 +81,27 @@ fn main() -> anyhow::Result<()> {
             let mut voter =
                 Voter::with_needs(&view, needs).with_hamming(&map, HammingWeights::DEFAULT);
             let mut spent = query.fixed_ms as f64;
+            let mut voted: Vec<Voted> = Vec::new();
             for (k, (&t, &(a, b, _))) in order.iter().zip(&spans).enumerate() {
                 let mut alone =
                     Voter::with_needs(&view, needs).with_hamming(&map, HammingWeights::DEFAULT);
                 for i in a..b {
                     voter.vote(coded.words[i], coded.signatures[i]);
                     alone.vote(coded.words[i], coded.signatures[i]);
+                    voted.push(Voted {
+                        feature: i as u32,
+                        word: coded.words[i],
+                        signature: coded.signatures[i],
+                    });
                 }
+                // the leader's inliers against the features so far, and its
+                // place's (the map images within the window, each checked)
+                let seen = with_keypoints(&voted, &query.keypoints);
+                let inliers = |j: u32| verify_leader(&map, j, &seen, &fit, &verify).inliers;
+                let (leader_inliers, place_inliers) = voter.tally().leader.map_or((0, 0), |l| {
+                    let place = l.saturating_sub(window)..=(l + window).min(images - 1);
+                    (inliers(l), place.map(inliers).sum::<usize>())
+                });
                 spent += query.tiles.get(t).map_or(0.0, |t| t.ms as f64);
                 let top = top_n(&voter, 5, 0.0, None, window);
                 let top1 = top.first().is_some_and(|r| truth.contains(&r.id));
@@ -89,7 +113,7 @@ fn main() -> anyhow::Result<()> {
                     _ => false,
                 };
                 println!(
-                    "{},{run},{q},{},{},{:.4},{},{},{z:.4},{},{alone_z:.4},{},{},{},{}",
+                    "{},{run},{q},{},{},{:.4},{},{},{z:.4},{},{alone_z:.4},{},{},{},{},{leader_inliers},{place_inliers}",
                     vocab.meta().seed,
                     k + 1,
                     order.len(),
