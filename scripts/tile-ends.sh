@@ -14,6 +14,9 @@
 #     rtabmap-loop;
 #   - the oracle that stops at the first tile end whose answer is as good as
 #     the full search's (a bound for any rule);
+#   - z with a geometric check: stop also at a lower z when the leader's
+#     place (the map images within 2 of it) has m inliers against the
+#     features voted so far;
 #   - how often the answer after two tiles is worse than the full search's,
 #     and how well z and other statistics rank those cases (AUC).
 #
@@ -74,6 +77,9 @@ best = min(
     if evaluate(gp, lambda e, i, t=t: e[i]["z"] > t[i])[0] <= 1.0
 )[1]
 show(f"best z per tile end {best}", *both(lambda e, i: e[i]["z"] > best[i]))
+for m in (12, 24, 48):
+    show(f"z > 1 with {m} place inliers, or z > 2",
+         *both(lambda e, i, m=m: (e[i]["z"] > 1 and e[i]["place_inliers"] >= m) or e[i]["z"] > 2))
 show("oracle", *both(lambda e, i: e[i]["top1"] >= e[-1]["top1"] and e[i]["top5"] >= e[-1]["top5"]))
 def auc(good, bad):
     """How often a search that answers as well as the full search scores above one that does not."""
@@ -87,6 +93,8 @@ statistics_at_two = {
     "z of the tile's votes alone": lambda e, p: e["tile_leader_z"],
     "the leader kept its place from the tile before": lambda e, p: float(abs(e["leader"] - p["leader"]) <= 2),
     "z's growth from the tile before": lambda e, p: e["z"] - p["z"],
+    "the leader's inliers": lambda e, p: e["leader_inliers"],
+    "its place's inliers": lambda e, p: e["place_inliers"],
 }
 worse = [ends for ends in gp.values()
          if ends[-1]["top1"] > ends[1]["top1"] or ends[-1]["top5"] > ends[1]["top5"]]
