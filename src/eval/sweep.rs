@@ -407,6 +407,15 @@ pub fn bisect_edge(
     Some(good)
 }
 
+/// What [`calibrate`] calibrates: a rule, the range its parameter is
+/// searched in (`lo`, `hi`, whole numbers only) and its warm-up.
+#[derive(Debug, Clone, Copy)]
+pub struct Subject<'a> {
+    pub rule: &'a str,
+    pub range: (f64, f64, bool),
+    pub min_features: usize,
+}
+
 /// Parameters of `rule` (grid `Calibrated { lo, hi, whole }`) at warm-up
 /// `min_features` for each target fraction, rounded to 3 significant digits,
 /// from one calibration run over all queries. A value is marked degenerate
@@ -417,13 +426,16 @@ pub fn bisect_edge(
 pub fn calibrate(
     map: &MapIndex,
     queries: &[Query],
-    rule: &str,
-    (lo, hi, whole): (f64, f64, bool),
-    min_features: usize,
+    subject: Subject<'_>,
     targets: &[f64],
     ranking: Ranking,
     bar: &ProgressBar,
 ) -> anyhow::Result<Vec<Calibration>> {
+    let Subject {
+        rule,
+        range: (lo, hi, whole),
+        min_features,
+    } = subject;
     let setting = |p: f64| -> anyhow::Result<Setting> {
         Ok(Setting::new(
             RuleSpec::new(rule, Some(p)).map_err(anyhow::Error::msg)?,
@@ -506,16 +518,12 @@ pub fn plan(
             }
             Grid::Calibrated { lo, hi, whole } => {
                 for &w in warmups {
-                    let found = calibrate(
-                        map,
-                        queries,
-                        g.rule,
-                        (lo, hi, whole),
-                        w,
-                        targets,
-                        ranking,
-                        bar,
-                    )?;
+                    let subject = Subject {
+                        rule: g.rule,
+                        range: (lo, hi, whole),
+                        min_features: w,
+                    };
+                    let found = calibrate(map, queries, subject, targets, ranking, bar)?;
                     let mut seen: Vec<f64> = Vec::new();
                     for c in &found {
                         if seen.contains(&c.parameter) {
@@ -691,9 +699,11 @@ mod tests {
         let found = calibrate(
             &map,
             &queries,
-            "fixed",
-            (0.2, 1.0, false),
-            0,
+            Subject {
+                rule: "fixed",
+                range: (0.2, 1.0, false),
+                min_features: 0,
+            },
             &[0.1, 0.5],
             Ranking::top(1),
             &bar,
@@ -739,9 +749,11 @@ mod tests {
         let found = calibrate(
             &map,
             &queries,
-            "fixed",
-            (0.01, 1.0, false),
-            0,
+            Subject {
+                rule: "fixed",
+                range: (0.01, 1.0, false),
+                min_features: 0,
+            },
             &[0.3, 0.7],
             Ranking::top(1),
             &bar,
