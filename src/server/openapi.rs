@@ -254,6 +254,22 @@ mod tests {
         }
     }
 
+    #[test]
+    fn tile_orders_are_named_where_clients_read_them() {
+        let described = parameter("/localize", "post", "tile_order");
+        let described = described["description"].as_str().unwrap();
+        let proto = include_str!("../../proto/localize.proto");
+        let proto_comment = proto
+            .lines()
+            .find(|l| l.contains("The order the tiles were extracted in"))
+            .expect("the proto documents the tile order");
+        for order in crate::search::TileOrder::ALL {
+            let name = format!("`{}`", order.name());
+            assert!(described.contains(&name), "OpenAPI: {name} missing");
+            assert!(proto_comment.contains(&name), "protobuf: {name} missing");
+        }
+    }
+
     /// A parameter of an operation in the served document.
     fn parameter(path: &str, method: &str, name: &str) -> serde_json::Value {
         let v: serde_json::Value = serde_json::from_str(json()).unwrap();
