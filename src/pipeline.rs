@@ -586,7 +586,7 @@ impl Localizer {
         tracing: Tracing,
     ) -> Result<Localization, FeatureError> {
         // a geometric stop verified its leader: its answer is verified too
-        let verify = verify || options.rule.info().geometric;
+        let verify = verify || options.rule.geometric();
         let (searched, options) = match verify {
             true => (self.options_for_verify(options), options),
             false => (options.clone(), options),

@@ -352,6 +352,10 @@ pub struct RuleReport {
     /// The parameter's value, absent for `none`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub value: Option<f64>,
+    /// Inliers that also stop the search once its leader has them
+    /// (`or_verified`); absent without.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub or_verified: Option<u32>,
 }
 
 impl From<&RuleSpec> for RuleReport {
@@ -361,6 +365,7 @@ impl From<&RuleSpec> for RuleReport {
             name: r.name.clone(),
             parameter,
             value: parameter.map(|_| r.parameter),
+            or_verified: r.or_verified,
         }
     }
 }

@@ -103,6 +103,10 @@ pub struct SearchArgs {
     /// ε of rule posterior: the probability left to places other than the leader's.
     #[arg(long)]
     pub epsilon: Option<f64>,
+    /// Also stop when the leader is geometrically verified with this many
+    /// inliers against the features voted so far (a vote rule only).
+    #[arg(long)]
+    pub or_verified: Option<f64>,
     /// Candidates to return.
     #[arg(long, default_value_t = SearchOptions::recommended().top_n)]
     pub top_n: usize,
@@ -154,6 +158,12 @@ impl SearchArgs {
                 Some(p) if p != "rule" => anyhow::anyhow!("--{p}: {}", e.message),
                 _ => anyhow::anyhow!("--rule: {}", e.message),
             })?
+        };
+        let rule = match self.or_verified {
+            Some(m) => rule
+                .or_verified(m)
+                .map_err(|e| anyhow::anyhow!("--or-verified: {e}"))?,
+            None => rule,
         };
         anyhow::ensure!(self.top_n >= 1, "--top-n must be at least 1");
         anyhow::ensure!(self.block >= 1, "--block must be at least 1");

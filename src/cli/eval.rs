@@ -23,8 +23,10 @@ pub struct EvalArgs {
     /// Rules to sweep, comma-separated (default: all); the full search is always run.
     #[arg(long, value_delimiter = ',')]
     rules: Vec<String>,
-    /// Extra settings to run, RULE=VALUE or RULE=VALUE@WARMUP (repeatable).
-    #[arg(long = "set", value_name = "RULE=VALUE[@WARMUP]")]
+    /// Extra settings to run, RULE=VALUE or RULE=VALUE@WARMUP (repeatable);
+    /// RULE=VALUE+verified=M[@WARMUP] also stops once the leader is verified
+    /// with M inliers.
+    #[arg(long = "set", value_name = "RULE=VALUE[+verified=M][@WARMUP]")]
     set: Vec<String>,
     /// Warm-ups (min_features) for the calibrated rules; the first is used for the main
     /// tables. `auto`: at most 100, and at most a quarter of the median query's features.

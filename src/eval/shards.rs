@@ -123,7 +123,7 @@ pub fn run(config: &ShardsConfig) -> anyhow::Result<Vec<ShardRow>> {
             .collect::<anyhow::Result<_>>()?
     };
     anyhow::ensure!(
-        settings.iter().all(|s| s.rule.info().shardable()),
+        settings.iter().all(|s| s.rule.shardable()),
         "rules that verify geometry or read the whole histogram are not simulated on shards"
     );
     let mut rows = Vec::new();

@@ -81,7 +81,7 @@ impl Setting {
     /// the rule is a geometric one.
     pub fn new(rule: RuleSpec, min_features: usize) -> Self {
         Self {
-            verify: rule.info().geometric,
+            verify: rule.geometric(),
             rule,
             min_features,
             target: None,
@@ -99,6 +99,9 @@ impl Setting {
         let mut s = self.rule.name.clone();
         if let Some(p) = self.parameter() {
             s += &format!(" {}", format_parameter(p));
+        }
+        if let Some(m) = self.rule.or_verified {
+            s += &format!(" or verified {m}");
         }
         if self.min_features > 0 {
             s += &format!(" w={}", self.min_features);
@@ -145,7 +148,9 @@ impl Ranking {
 }
 
 /// A setting written `RULE=VALUE` or `RULE=VALUE@WARMUP` (warm-up
-/// `warmup` when not given), or `RULE` for a rule without a parameter.
+/// `warmup` when not given), or `RULE` for a rule without a parameter; a
+/// vote rule followed by `+verified=M` also stops once its leader is
+/// verified with M inliers (`place-z=2+verified=16@20`).
 pub fn parse_setting(spec: &str, warmup: usize) -> anyhow::Result<Setting> {
     let (body, min_features) = match spec.split_once('@') {
         Some((b, w)) => (
@@ -155,6 +160,20 @@ pub fn parse_setting(spec: &str, warmup: usize) -> anyhow::Result<Setting> {
                 .map_err(|e| anyhow::anyhow!("`{spec}`: warm-up: {e}"))?,
         ),
         None => (spec, warmup),
+    };
+    let (body, or_verified) = match body.split_once('+') {
+        Some((b, extra)) => {
+            let m = extra
+                .trim()
+                .strip_prefix("verified=")
+                .ok_or_else(|| anyhow::anyhow!("`{spec}`: after `+`, only `verified=M`"))?;
+            let m: f64 = m
+                .trim()
+                .parse()
+                .map_err(|e| anyhow::anyhow!("`{spec}`: verified inliers: {e}"))?;
+            (b, Some(m))
+        }
+        None => (body, None),
     };
     let (name, value) = match body.split_once('=') {
         Some((n, v)) => (
@@ -167,10 +186,13 @@ pub fn parse_setting(spec: &str, warmup: usize) -> anyhow::Result<Setting> {
         ),
         None => (body.trim(), None),
     };
-    Ok(Setting::new(
-        RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?,
-        min_features,
-    ))
+    let mut rule = RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?;
+    if let Some(m) = or_verified {
+        rule = rule
+            .or_verified(m)
+            .map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?;
+    }
+    Ok(Setting::new(rule, min_features))
 }
 
 /// A parameter value as tables show it (up to 3 significant digits).

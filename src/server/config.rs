@@ -215,6 +215,10 @@ pub struct SearchDefaults {
     /// Parameter of `rule`, when it takes one (`bowloc rules` names each).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub threshold: Option<f64>,
+    /// Also stop when the leader is verified with this many inliers (a vote
+    /// rule only; absent: no such check).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub or_verified: Option<u32>,
     pub top_n: usize,
     pub min_features: usize,
     pub block: usize,
@@ -306,6 +310,7 @@ impl Default for SearchDefaults {
         let o = SearchOptions::recommended();
         Self {
             threshold: o.rule.parameter_name().map(|_| o.rule.parameter),
+            or_verified: o.rule.or_verified,
             rule: o.rule.name,
             top_n: o.top_n,
             min_features: o.min_features,
@@ -635,7 +640,10 @@ impl Config {
         if rule.parameter_name().is_none() && s.threshold.is_some() {
             return Err(format!("rule `{}` takes no parameter", rule.name));
         }
-        Ok(rule)
+        match s.or_verified {
+            Some(m) => rule.or_verified(m as f64),
+            None => Ok(rule),
+        }
     }
 
     /// Worker threads: the configured count, or one per core.

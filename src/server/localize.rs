@@ -47,6 +47,13 @@ pub struct LocalizeParams {
     pub inliers: Option<String>,
     #[param(value_type = Option<f64>)]
     pub epsilon: Option<String>,
+    /// Also stop when the leader is geometrically verified with at least
+    /// this many inliers against the features voted so far, whichever of
+    /// the rule and this check comes first (a vote rule only). Default: the
+    /// configured `search.or_verified` when the request uses the configured
+    /// rule, none when it names another.
+    #[param(value_type = Option<u32>, minimum = 4, maximum = 1000)]
+    pub or_verified: Option<String>,
     /// Seed of the feature permutation (0 to 2^63−1, the API document's
     /// int64). Without it each request draws its own, below 2^53 so that it
     /// survives a JSON number; the answer reports the seed used.
@@ -296,13 +303,20 @@ impl LocalizeParams {
             }
         }
         let name = self.rule.as_deref().unwrap_or(&default.name);
-        if given.is_empty() && name == default.name {
-            return Ok(default.clone());
+        let rule = if given.is_empty() && name == default.name {
+            default.clone()
+        } else {
+            parse_rule(name, &given).map_err(|e| match e.parameter {
+                None => ApiError::bad_request("unknown_rule", e.message),
+                Some(p) => ApiError::invalid_parameter(&p, e.message),
+            })?
+        };
+        match &self.or_verified {
+            None => Ok(rule),
+            Some(v) => rule
+                .or_verified(number("or_verified", v)?)
+                .map_err(|e| ApiError::invalid_parameter("or_verified", e)),
         }
-        parse_rule(name, &given).map_err(|e| match e.parameter {
-            None => ApiError::bad_request("unknown_rule", e.message),
-            Some(p) => ApiError::invalid_parameter(&p, e.message),
-        })
     }
 }
 

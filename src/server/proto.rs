@@ -43,6 +43,7 @@ impl From<&Localization> for pb::Localization {
                 name: a.rule.name.clone(),
                 parameter: a.rule.parameter.map(str::to_owned),
                 value: a.rule.value,
+                or_verified: a.rule.or_verified,
             }),
             stop: Some(stop(&a.stop)),
             seed: a.seed,

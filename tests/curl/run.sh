@@ -204,7 +204,12 @@ check "tile_order=random is reported and extracts every tile" jqt --arg s "$stat
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=2x2%2B24&tile_order=spread&seed=3")
 check "tile_order=spread is reported and extracts every tile" jqt --arg s "$status" '
   $s == "200" and .tiles == {"extracted": 4, "total": 4, "grid": "2x2+24", "order": "spread"}' "$B"
-for bad in "tiles=0x2" "tile_order=sideways" "rule=none&threshold=2" "rule=peak-mean&inliers=12" "rule=verified&inliers=3"; do
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=place-z&threshold=2&or_verified=12&seed=3")
+check "or_verified=12 beside place-z is reported and verifies the answer ($(jq -c .stop.detail "$B"))" jqt --arg s "$status" '
+  $s == "200" and .rule.name == "place-z" and .rule.or_verified == 12
+  and (.candidates[0] | has("inliers") and has("verified"))' "$B"
+for bad in "tiles=0x2" "tile_order=sideways" "rule=none&threshold=2" "rule=peak-mean&inliers=12" "rule=verified&inliers=3" \
+  "rule=none&or_verified=12" "rule=verified&inliers=12&or_verified=12" "or_verified=3" "or_verified=abc"; do
   status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?$bad")
   check "$bad is 400 invalid_parameter ($(jq -r .error.message "$B"))" \
     test "$status/$(jq -r .error.code "$B")" = "400/invalid_parameter"

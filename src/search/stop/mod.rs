@@ -8,6 +8,7 @@ mod fixed;
 mod hoeffding;
 mod lossless;
 mod none;
+mod or_verified;
 mod peak_mean;
 mod place_lead;
 mod place_z;
@@ -264,6 +265,10 @@ pub struct RuleSpec {
     /// The rule's parameter (ignored by rules that take none).
     #[serde(default)]
     pub parameter: f64,
+    /// Also stop when the leader is verified with this many inliers
+    /// ([`RuleSpec::or_verified`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub or_verified: Option<u32>,
 }
 
 impl RuleSpec {
@@ -287,6 +292,32 @@ impl RuleSpec {
         Ok(Self {
             name: info.name.to_owned(),
             parameter,
+            or_verified: None,
+        })
+    }
+
+    /// The rule, which also stops once the search's leader is verified with
+    /// at least `inliers` inliers against the features voted so far (the
+    /// `verified` rule's check and schedule). Refused for a rule that cannot
+    /// stop early (`none`: use `verified` itself) and for a geometric one.
+    pub fn or_verified(self, inliers: f64) -> Result<Self, String> {
+        let info = self.info();
+        if !info.stops_early || info.geometric {
+            return Err(format!(
+                "rule `{}` cannot be combined with a verified stop{}",
+                self.name,
+                if info.geometric {
+                    ": it verifies already"
+                } else {
+                    "; use rule `verified`"
+                }
+            ));
+        }
+        let verified = RuleSpec::new(verified::INFO.name, Some(inliers))
+            .map_err(|e| format!("or_verified: {e}"))?;
+        Ok(Self {
+            or_verified: Some(verified.parameter as u32),
+            ..self
         })
     }
 
@@ -294,9 +325,28 @@ impl RuleSpec {
         rule_info(&self.name).expect("validated on construction")
     }
 
+    /// Whether the search verifies candidates geometrically: a geometric
+    /// rule, or a vote rule with a verified stop.
+    pub fn geometric(&self) -> bool {
+        self.info().geometric || self.or_verified.is_some()
+    }
+
+    /// Whether a sharded map runs it as one machine does.
+    pub fn shardable(&self) -> bool {
+        self.info().shardable() && self.or_verified.is_none()
+    }
+
     /// A fresh instance for one query.
     pub fn build(&self, context: &RuleContext) -> Box<dyn StopRule> {
-        (self.info().make)(self.parameter, context).expect("validated on construction")
+        let rule = (self.info().make)(self.parameter, context).expect("validated on construction");
+        match self.or_verified {
+            None => rule,
+            Some(m) => Box::new(or_verified::OrVerified {
+                votes: rule,
+                verified: (verified::INFO.make)(m as f64, context)
+                    .expect("validated on construction"),
+            }),
+        }
     }
 
     /// Name of the parameter, if the rule takes one.
@@ -308,8 +358,12 @@ impl RuleSpec {
 impl std::fmt::Display for RuleSpec {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self.parameter_name() {
-            Some(p) => write!(f, "{} ({p} {})", self.name, self.parameter),
-            None => write!(f, "{}", self.name),
+            Some(p) => write!(f, "{} ({p} {})", self.name, self.parameter)?,
+            None => write!(f, "{}", self.name)?,
+        }
+        match self.or_verified {
+            Some(m) => write!(f, " or verified (inliers {m})"),
+            None => Ok(()),
         }
     }
 }

@@ -438,6 +438,75 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     assert!(RuleSpec::new("verified", Some(8.5)).is_err());
 }
 
+/// Where `rule` stops on `stream` (every check offered at a batch's end),
+/// with `check` as the geometric check if given.
+fn stops_with_check(
+    rule: &RuleSpec,
+    stream: &[u32],
+    mut check: Option<&mut FakeCheck>,
+) -> Option<usize> {
+    let map = one_word_per_image();
+    let view = map.view();
+    let mut rule_now = rule.build(&RuleContext::default());
+    let mut voter = Voter::with_needs(&view, rule_now.needs());
+    let mut voted = Vec::new();
+    for (i, &w) in stream.iter().enumerate() {
+        voter.vote(w, 0);
+        voted.push(Voted {
+            feature: i as u32,
+            word: w,
+            signature: 0,
+        });
+        let offered = check.as_mut().map(|c| &mut **c as &mut dyn LeaderCheck);
+        if rule_now.check_with(&voter, &voted, offered, true).is_some() {
+            return Some(voter.tally().features);
+        }
+    }
+    None
+}
+
+#[test]
+fn a_vote_rule_or_verified_stops_at_whichever_comes_first() {
+    let s = [0u32; 200];
+    let votes = spec("stable-peak", 50.0);
+    let alone = stops_at_peak(&votes, &s);
+    assert!(alone.is_some_and(|t| t > 1), "{alone:?}");
+    let either = votes.clone().or_verified(12.0).unwrap();
+    assert!(either.geometric() && !either.shardable());
+    assert!(votes.shardable() && !votes.geometric());
+    assert_eq!(either.to_string(), "stable-peak (threshold 50) or verified (inliers 12)");
+    // the leader verifies at the first check: the check stops the search
+    let mut c = FakeCheck {
+        inliers: 12,
+        calls: 0,
+    };
+    assert_eq!(stops_with_check(&either, &s, Some(&mut c)), Some(1));
+    // it never verifies: the vote rule stops it where it would alone
+    let mut c = FakeCheck {
+        inliers: 11,
+        calls: 0,
+    };
+    assert_eq!(stops_with_check(&either, &s, Some(&mut c)), alone);
+    assert!(c.calls > 0);
+    // without a check, the vote rule alone
+    assert_eq!(stops_with_check(&either, &s, None), alone);
+    // it travels with the rule and is absent when not set
+    let json = serde_json::to_string(&either).unwrap();
+    assert_eq!(serde_json::from_str::<RuleSpec>(&json).unwrap(), either);
+    assert!(!serde_json::to_string(&votes).unwrap().contains("or_verified"));
+    // refused: a rule that cannot stop early, one that verifies already, and
+    // inliers out of the verified rule's range
+    assert!(RuleSpec::new("none", None).unwrap().or_verified(12.0).is_err());
+    assert!(spec("verified", 12.0).or_verified(12.0).is_err());
+    assert!(votes.clone().or_verified(3.0).is_err());
+    assert!(votes.or_verified(12.5).is_err());
+}
+
+/// Where `rule` stops on `stream` without a geometric check.
+fn stops_at_peak(rule: &RuleSpec, stream: &[u32]) -> Option<usize> {
+    stops_with_check(rule, stream, None)
+}
+
 /// [`stops_on`] a map of `images` images, image j holding only word j, with
 /// places of `place_window` images on each side.
 fn stops_at_in_place(
