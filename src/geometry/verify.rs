@@ -531,25 +531,33 @@ mod tests {
         assert!(!count_inliers(&pairs(&grid), &fit, 17).verified);
     }
 
-    #[test]
-    fn reranked_candidates_carry_the_inliers_their_fit_counted() {
-        use crate::index::{ImageWords, MapBuilder};
-        // map image 0 shares 20 spread words with the query, image 1 none
-        let kp = |i: u32| Keypoint {
+    /// Keypoint of word `i`, on a grid of 5 columns 17 px apart and rows
+    /// 13 px apart.
+    fn grid_keypoint(i: u32) -> Keypoint {
+        Keypoint {
             x: (i % 5) as f32 * 17.0 + 3.0,
             y: (i / 5) as f32 * 13.0 + 5.0,
             size: 4.0,
             angle: 0.0,
             response: 1.0,
-        };
+        }
+    }
+
+    #[test]
+    fn reranked_candidates_carry_the_inliers_their_fit_counted() {
+        use crate::index::{ImageWords, MapBuilder};
+        // map image 0 shares 20 spread words with the query, image 1 none
         let words: Vec<u32> = (0..20).collect();
-        let kps: Vec<Keypoint> = words.iter().map(|&w| kp(w)).collect();
+        let kps: Vec<Keypoint> = words.iter().map(|&w| grid_keypoint(w)).collect();
         let other: Vec<u32> = (20..40).collect();
         let mut b = MapBuilder::new(40);
         b.add(ImageWords::with_geometry("a", &words, &[], &kps));
         b.add(ImageWords::with_geometry("b", &other, &[], &kps));
         let map = b.build("m", "v", None);
-        let query: Vec<QueryFeature> = words.iter().map(|&w| (w, kp(w)).into()).collect();
+        let query: Vec<QueryFeature> = words
+            .iter()
+            .map(|&w| (w, grid_keypoint(w)).into())
+            .collect();
         let fit = AllInliers(VerifyParams::default().fit());
         let out = rerank(
             &map,
@@ -570,24 +578,17 @@ mod tests {
     #[test]
     fn the_place_order_adds_up_the_inliers_of_neighbouring_images() {
         use crate::index::{ImageWords, MapBuilder};
-        let kp = |i: u32| Keypoint {
-            x: (i % 5) as f32 * 17.0 + 3.0,
-            y: (i / 5) as f32 * 13.0 + 5.0,
-            size: 4.0,
-            angle: 0.0,
-            response: 1.0,
-        };
         // along the map's order: images 0 and 1 share 14 and 13 words with
         // the query, 2 and 3 none, image 4 shares 20
         let shared: [std::ops::Range<u32>; 5] = [0..14, 14..27, 60..61, 61..62, 27..47];
         let mut b = MapBuilder::new(64);
         for (j, words) in shared.iter().enumerate() {
             let words: Vec<u32> = words.clone().collect();
-            let kps: Vec<Keypoint> = words.iter().map(|&w| kp(w)).collect();
+            let kps: Vec<Keypoint> = words.iter().map(|&w| grid_keypoint(w)).collect();
             b.add(ImageWords::with_geometry(format!("{j}"), &words, &[], &kps));
         }
         let map = b.build("m", "v", None);
-        let query: Vec<QueryFeature> = (0..47).map(|w| (w, kp(w)).into()).collect();
+        let query: Vec<QueryFeature> = (0..47).map(|w| (w, grid_keypoint(w)).into()).collect();
         let fit = AllInliers(VerifyParams::default().fit());
         let votes = [(4, 0.9), (1, 0.5), (0, 0.4)];
         let ranked = |order: Order, window: u32| -> Vec<(u32, f32)> {

@@ -40,8 +40,9 @@ impl StopRule for OrVerified {
         leader_check: Option<&mut dyn LeaderCheck>,
         batch_end: bool,
     ) -> Option<String> {
-        self.votes
-            .check(voter)
-            .or_else(|| self.verified.check_with(voter, voted, leader_check, batch_end))
+        self.votes.check(voter).or_else(|| {
+            self.verified
+                .check_with(voter, voted, leader_check, batch_end)
+        })
     }
 }

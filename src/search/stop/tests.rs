@@ -336,23 +336,7 @@ impl LeaderCheck for FakeCheck {
 }
 
 fn verified_stop(m: f64, stream: &[u32], check: &mut FakeCheck) -> Option<usize> {
-    let map = one_word_per_image();
-    let view = map.view();
-    let mut voter = Voter::new(&view);
-    let mut rule = spec("verified", m).build(&RuleContext::default());
-    let mut voted = Vec::new();
-    for (i, &w) in stream.iter().enumerate() {
-        voter.vote(w, 0);
-        voted.push(Voted {
-            feature: i as u32,
-            word: w,
-            signature: 0,
-        });
-        if rule.check_with(&voter, &voted, Some(check), true).is_some() {
-            return Some(voter.tally().features);
-        }
-    }
-    None
+    stops_with_check(&spec("verified", m), stream, Some(check))
 }
 
 #[test]
@@ -469,12 +453,15 @@ fn stops_with_check(
 fn a_vote_rule_or_verified_stops_at_whichever_comes_first() {
     let s = [0u32; 200];
     let votes = spec("stable-peak", 50.0);
-    let alone = stops_at_peak(&votes, &s);
+    let alone = stops_with_check(&votes, &s, None);
     assert!(alone.is_some_and(|t| t > 1), "{alone:?}");
     let either = votes.clone().or_verified(12.0).unwrap();
     assert!(either.geometric() && !either.shardable());
     assert!(votes.shardable() && !votes.geometric());
-    assert_eq!(either.to_string(), "stable-peak (threshold 50) or verified (inliers 12)");
+    assert_eq!(
+        either.to_string(),
+        "stable-peak (threshold 50) or verified (inliers 12)"
+    );
     // the leader verifies at the first check: the check stops the search
     let mut c = FakeCheck {
         inliers: 12,
@@ -493,18 +480,22 @@ fn a_vote_rule_or_verified_stops_at_whichever_comes_first() {
     // it travels with the rule and is absent when not set
     let json = serde_json::to_string(&either).unwrap();
     assert_eq!(serde_json::from_str::<RuleSpec>(&json).unwrap(), either);
-    assert!(!serde_json::to_string(&votes).unwrap().contains("or_verified"));
+    assert!(
+        !serde_json::to_string(&votes)
+            .unwrap()
+            .contains("or_verified")
+    );
     // refused: a rule that cannot stop early, one that verifies already, and
     // inliers out of the verified rule's range
-    assert!(RuleSpec::new("none", None).unwrap().or_verified(12.0).is_err());
+    assert!(
+        RuleSpec::new("none", None)
+            .unwrap()
+            .or_verified(12.0)
+            .is_err()
+    );
     assert!(spec("verified", 12.0).or_verified(12.0).is_err());
     assert!(votes.clone().or_verified(3.0).is_err());
     assert!(votes.or_verified(12.5).is_err());
-}
-
-/// Where `rule` stops on `stream` without a geometric check.
-fn stops_at_peak(rule: &RuleSpec, stream: &[u32]) -> Option<usize> {
-    stops_with_check(rule, stream, None)
 }
 
 /// [`stops_on`] a map of `images` images, image j holding only word j, with
