@@ -510,7 +510,7 @@ impl Config {
         let bad = |key: &str, why: String| Err(ConfigError::at(key, why));
         let s = &self.search;
         if let Err(e) = self.default_rule() {
-            return bad("search.rule / search.threshold", e);
+            return bad("search.rule / search.threshold / search.or_verified", e);
         }
         if let Err(e) = self.quantizer() {
             return bad("search.quantizer / search.tree_probes", e);
@@ -849,6 +849,25 @@ mod tests {
     fn a_rule_with_its_parameter_loads() {
         let c = load_str("[search]\nrule = \"hoeffding\"\nthreshold = 0.05\n", &[]).unwrap();
         assert_eq!(c.default_rule().unwrap().parameter, 0.05);
+    }
+
+    #[test]
+    fn or_verified_joins_the_default_rule_and_is_checked() {
+        let c = load_str("[search]\nor_verified = 16\n", &[]).unwrap();
+        let rule = c.default_rule().unwrap();
+        assert_eq!(
+            (rule.name.as_str(), rule.or_verified),
+            ("place-z", Some(16))
+        );
+        assert!(rule.geometric());
+        assert_eq!(Config::default().default_rule().unwrap().or_verified, None);
+        for bad in [
+            "[search]\nrule = \"none\"\nor_verified = 16\n",
+            "[search]\nor_verified = 2\n",
+        ] {
+            let e = load_str(bad, &[]).unwrap_err().to_string();
+            assert!(e.contains("search.or_verified"), "{bad}: {e}");
+        }
     }
 
     #[test]
