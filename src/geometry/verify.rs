@@ -398,9 +398,8 @@ pub struct Reranked {
     pub id: u32,
     /// The vote score it had.
     pub votes: f32,
-    /// Its score after verification: its inliers, or with [`Order::Place`]
-    /// its place's (0 when not checked).
-    pub score: f32,
+    /// Its score after verification ([`Reranked::score`]).
+    score: f32,
     /// `None` beyond the top k (not verified).
     pub verification: Option<Verification>,
     /// The pairs the fit took as inliers (empty unless it verified some).

@@ -10,7 +10,7 @@ use crate::features::TileGrid;
 use crate::index::MapRead;
 use crate::pipeline::Tracing;
 use crate::report::{Localization, SequenceAnswer};
-use crate::search::stop::{GENERIC_PARAMETER, parse_rule};
+use crate::search::stop::{GENERIC_PARAMETER, OR_VERIFIED, parse_rule};
 use crate::search::{Prior, RuleSpec, SearchOptions};
 use axum::Json;
 use axum::body::Bytes;
@@ -52,7 +52,9 @@ pub struct LocalizeParams {
     /// the rule and this check comes first (a vote rule only). Default: the
     /// configured `search.or_verified` when the request uses the configured
     /// rule, none when it names another.
-    #[param(value_type = Option<u32>, minimum = 4, maximum = 1000)]
+    // its range, the `verified` rule's, is set from the registry in the API
+    // document
+    #[param(value_type = Option<u32>)]
     pub or_verified: Option<String>,
     /// Seed of the feature permutation (0 to 2^63−1, the API document's
     /// int64). Without it each request draws its own, below 2^53 so that it
@@ -314,8 +316,8 @@ impl LocalizeParams {
         match &self.or_verified {
             None => Ok(rule),
             Some(v) => rule
-                .or_verified(number("or_verified", v)?)
-                .map_err(|e| ApiError::invalid_parameter("or_verified", e)),
+                .or_verified(number(OR_VERIFIED, v)?)
+                .map_err(|e| ApiError::invalid_parameter(OR_VERIFIED, e)),
         }
     }
 }

@@ -13,7 +13,9 @@ use crate::report::{
     MapIdentity, RacePoint, RaceTrace, RuleReport, SequenceAnswer, Timings,
 };
 use crate::search::StopInfo;
-use crate::search::stop::{GENERIC_PARAMETER, Parameter, RULES, rule_names};
+use crate::search::stop::{
+    GENERIC_PARAMETER, OR_VERIFIED, Parameter, RULES, Range, rule_info, rule_names,
+};
 use std::sync::LazyLock;
 use utoipa::OpenApi;
 use utoipa::openapi::path::ParameterIn;
@@ -143,6 +145,12 @@ fn describe_rules(doc: &mut utoipa::openapi::OpenApi) {
                     .enum_values(Some(rule_names()))
                     .into(),
             );
+        } else if p.name == OR_VERIFIED && p.parameter_in == ParameterIn::Query {
+            // the verified rule's own parameter, so its range
+            let verified = rule_info("verified").and_then(|r| r.parameter);
+            if let Some(q) = verified {
+                set_range(p, q.range);
+            }
         } else if p.parameter_in == ParameterIn::Query {
             describe_rule_parameter(p);
         }
@@ -153,7 +161,6 @@ fn describe_rules(doc: &mut utoipa::openapi::OpenApi) {
 /// names its parameter): what it means for each rule that takes it, and,
 /// where those rules agree, its range.
 fn describe_rule_parameter(p: &mut utoipa::openapi::path::Parameter) {
-    use utoipa::openapi::{RefOr, Schema};
     let takers: Vec<(&str, Parameter)> = RULES
         .iter()
         .filter_map(|r| r.parameter.map(|q| (r.name, q)))
@@ -177,6 +184,12 @@ fn describe_rule_parameter(p: &mut utoipa::openapi::path::Parameter) {
     if p.name == GENERIC_PARAMETER || takers.iter().any(|(_, q)| q.range != range) {
         return;
     }
+    set_range(p, range);
+}
+
+/// `p`'s minimum and maximum, as `range` has them.
+fn set_range(p: &mut utoipa::openapi::path::Parameter, range: Range) {
+    use utoipa::openapi::{RefOr, Schema};
     let Some(RefOr::T(Schema::Object(o))) = p.schema.as_mut() else {
         return;
     };
@@ -252,6 +265,15 @@ mod tests {
                 "{name} undocumented"
             );
         }
+    }
+
+    #[test]
+    fn or_verified_takes_the_verified_rules_range() {
+        let p = parameter("/localize", "post", OR_VERIFIED);
+        let m = rule_info("verified").unwrap().parameter.unwrap();
+        let (lo, _, hi, _) = m.range.bounds();
+        assert_eq!(p["schema"]["minimum"], lo as u64);
+        assert_eq!(p["schema"]["maximum"], hi.unwrap() as u64);
     }
 
     #[test]

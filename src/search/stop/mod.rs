@@ -210,6 +210,10 @@ impl RuleInfo {
 /// and the config, `--threshold` in the CLI).
 pub const GENERIC_PARAMETER: &str = "threshold";
 
+/// The name of a vote rule's verified stop (`or_verified=` in the API and
+/// the config, `--or-verified` in the CLI; [`RuleSpec::or_verified`]).
+pub const OR_VERIFIED: &str = "or_verified";
+
 /// The rule table of the docs, generated from the registry (`bowloc rules`).
 pub fn rules_markdown() -> String {
     let mut out = String::from(
@@ -313,10 +317,10 @@ impl RuleSpec {
                 }
             ));
         }
-        let verified = RuleSpec::new(verified::INFO.name, Some(inliers))
-            .map_err(|e| format!("or_verified: {e}"))?;
+        let range = verified::INFO.parameter.expect("verified takes m").range;
+        let m = range.check(OR_VERIFIED, inliers)?;
         Ok(Self {
-            or_verified: Some(verified.parameter as u32),
+            or_verified: Some(m as u32),
             ..self
         })
     }
