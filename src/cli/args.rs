@@ -70,6 +70,17 @@ pub fn tile_order_parser() -> impl clap::builder::TypedValueParser<Value = TileO
     .map(|name: String| name.parse::<TileOrder>().expect("a listed tile order"))
 }
 
+/// The verification orders, each with what it does, parsed to an [`Order`].
+fn verify_order_parser() -> impl clap::builder::TypedValueParser<Value = Order> {
+    use clap::builder::TypedValueParser as _;
+    PossibleValuesParser::new(
+        Order::ALL
+            .iter()
+            .map(|o| PossibleValue::new(o.name()).help(o.about())),
+    )
+    .map(|name: String| name.parse::<Order>().expect("a listed order"))
+}
+
 fn rule_parser() -> PossibleValuesParser {
     PossibleValuesParser::new(
         RULES
@@ -317,11 +328,8 @@ pub struct VerifyArgs {
     /// in at most this many bits (64: every pair).
     #[arg(long, default_value_t = VerifyParams::default().max_hamming)]
     pub max_hamming: u32,
-    /// Order of the verified candidates: inliers (most first), verified
-    /// (those with at least --min-inliers first, each group in vote order) or
-    /// place (by the inliers of the candidate and its checked neighbours
-    /// within the place window, most first).
-    #[arg(long, default_value = "place")]
+    /// Order of the verified candidates.
+    #[arg(long, default_value_t = VerifyParams::default().order, value_parser = verify_order_parser())]
     pub verify_order: Order,
     /// Geometric model: homography or fundamental.
     #[arg(long, default_value = "homography")]

@@ -53,7 +53,8 @@ pub enum Order {
 }
 
 impl Order {
-    pub const ALL: [Order; 3] = [Order::Inliers, Order::Verified, Order::Place];
+    /// Every order, the default first.
+    pub const ALL: [Order; 3] = [Order::Place, Order::Inliers, Order::Verified];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -61,6 +62,26 @@ impl Order {
             Self::Verified => "verified",
             Self::Place => "place",
         }
+    }
+
+    /// What the order does, in a line (for help texts).
+    pub fn about(self) -> &'static str {
+        match self {
+            Self::Place => {
+                "by the inliers of the candidate and of the checked candidates within the \
+                 place window of it, most first"
+            }
+            Self::Inliers => "by the candidate's own inliers, most first",
+            Self::Verified => {
+                "the verified candidates (at least min_inliers) first, each group in vote order"
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for Order {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
@@ -70,7 +91,10 @@ impl std::str::FromStr for Order {
         Self::ALL
             .into_iter()
             .find(|o| o.name() == s)
-            .ok_or_else(|| format!("unknown order `{s}`; use inliers, verified or place"))
+            .ok_or_else(|| {
+                let names: Vec<&str> = Self::ALL.iter().map(|o| o.name()).collect();
+                format!("unknown order `{s}`; use one of {}", names.join(", "))
+            })
     }
 }
 

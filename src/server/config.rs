@@ -743,6 +743,14 @@ mod tests {
                 "config/default.toml must describe the tile order {quoted}"
             );
         }
+        // every verification order, quoted
+        for order in crate::geometry::verify::Order::ALL {
+            let quoted = format!("\"{}\"", order.name());
+            assert!(
+                comments.contains(&quoted),
+                "config/default.toml must describe the verification order {quoted}"
+            );
+        }
     }
 
     #[test]
