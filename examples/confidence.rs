@@ -19,7 +19,7 @@ use bowloc::features::TileGrid;
 use bowloc::pipeline::code;
 use bowloc::search::rank::distinctness;
 use bowloc::search::stop::RuleContext;
-use bowloc::search::{HammingWeights, Needs, Ranked, RuleSpec, SearchOptions, VoteStats, Voter};
+use bowloc::search::{HammingWeights, Ranked, RuleSpec, SearchOptions, VoteStats, Voter};
 use std::collections::HashSet;
 
 /// A query's top candidate, its distinctness and place-z's statistic.
@@ -67,11 +67,8 @@ fn main() -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)?
         .build(&context);
     let view = map.view();
-    let needs = Needs {
-        top: 2 * window as usize + 2,
-        squares: true,
-        ..Needs::default()
-    };
+    // what place-z reads: the leaders a place needs, and their Σv²
+    let needs = z_rule.needs();
     // per query: its top candidate with its distinctness and z
     let tops: Vec<Option<Top>> = (0..queries.len())
         .map(|q| {

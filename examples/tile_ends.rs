@@ -23,9 +23,7 @@ use bowloc::geometry::verify::{VerifyParams, verify_leader, with_keypoints};
 use bowloc::pipeline::code;
 use bowloc::search::rank::top_n;
 use bowloc::search::stop::RuleContext;
-use bowloc::search::{
-    HammingWeights, Needs, RuleSpec, SearchOptions, TileOrder, VoteStats, Voted, Voter,
-};
+use bowloc::search::{HammingWeights, RuleSpec, SearchOptions, TileOrder, VoteStats, Voted, Voter};
 
 const RUNS: u32 = 3;
 
@@ -52,11 +50,8 @@ fn main() -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)?
         .build(&context);
     let view = map.view();
-    let needs = Needs {
-        top: 2 * window as usize + 2,
-        squares: true,
-        ..Needs::default()
-    };
+    // what place-z reads: the leaders a place needs, and their Σv²
+    let needs = z_rule.needs();
     let same_place = |a: u32, b: u32| a.abs_diff(b) <= window;
     bowloc::features::set_opencv_threads(1);
     let verify = VerifyParams::default();

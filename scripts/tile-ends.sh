@@ -25,7 +25,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-data/eval/tile-ends}
 mkdir -p "$out"
-cargo build --release --example tile_ends >/dev/null 2>&1
+cargo build --release --quiet --example tile_ends
 for seed in 1 2 3; do
   ./target/release/examples/tile_ends ../shared/datasets/gardens-point 5000 $seed >"$out/gardens-point-$seed.csv" 2>/dev/null
   ./target/release/examples/tile_ends ../shared/datasets/rtabmap-loop 1000 $seed >"$out/rtabmap-loop-$seed.csv" 2>/dev/null
@@ -71,11 +71,9 @@ def predictive(e, i):
 for z in (1.5, 2, 3, 3.5, 4):
     show(f"predictive z {z}", *both(lambda e, i, z=z: predictive(e, i) > z))
 grid = [1, 1.25, 1.5, 1.75, 2, 2.5, 3, 4, math.inf]
-best = min(
-    (evaluate(gp, lambda e, i, t=t: e[i]["z"] > t[i])[1], t)
-    for t in itertools.product(grid, repeat=3)
-    if evaluate(gp, lambda e, i, t=t: e[i]["z"] > t[i])[0] <= 1.0
-)[1]
+schedules = ((evaluate(gp, lambda e, i, t=t: e[i]["z"] > t[i]), t)
+             for t in itertools.product(grid, repeat=3))
+best = min((median, t) for (loss, median, _), t in schedules if loss <= 1.0)[1]
 show(f"best z per tile end {best}", *both(lambda e, i: e[i]["z"] > best[i]))
 for m in (12, 24, 48):
     show(f"z > 1 with {m} place inliers, or z > 2",
