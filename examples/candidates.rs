@@ -2,7 +2,9 @@
 //! vocabulary seed, each query is searched in full (whole image, Hamming
 //! weights) and its top 10 candidates verified as the service verifies them.
 //! One CSV row per candidate: its vote rank, vote score, distinctness,
-//! inliers and whether it is a true match.
+//! inliers and whether it is a true match (rank -1: a query without
+//! features). `scripts/verify-orders.sh` orders the rows as each
+//! verification order would.
 //!
 //! ```sh
 //! cargo run --release --example candidates -- ../shared/datasets/gardens-point 5000 1 > candidates.csv
@@ -33,7 +35,10 @@ fn main() -> anyhow::Result<()> {
         if truth.is_empty() {
             continue;
         }
+        // a query without features: one row without a candidate
+        let no_candidate = || println!("{},{q},-1,-1,0,0,0,0,0,0", p.vocab.meta().seed);
         let Some(d) = p.queries.image(q) else {
+            no_candidate();
             continue;
         };
         let coded = code(&p.vocab, d);
@@ -43,6 +48,10 @@ fn main() -> anyhow::Result<()> {
             voter.vote(w, s);
         }
         let top = top_n(&voter, params.top_k, 0.0, None, window);
+        if top.is_empty() {
+            no_candidate();
+            continue;
+        }
         let voted: Vec<Voted> = coded
             .words
             .iter()
