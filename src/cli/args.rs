@@ -170,12 +170,9 @@ impl SearchArgs {
                 _ => anyhow::anyhow!("--rule: {}", e.message),
             })?
         };
-        let rule = match self.or_verified {
-            Some(m) => rule
-                .or_verified(m)
-                .map_err(|e| anyhow::anyhow!("--or-verified: {e}"))?,
-            None => rule,
-        };
+        let rule = rule
+            .or_verified(self.or_verified)
+            .map_err(|e| anyhow::anyhow!("--or-verified: {e}"))?;
         anyhow::ensure!(self.top_n >= 1, "--top-n must be at least 1");
         anyhow::ensure!(self.block >= 1, "--block must be at least 1");
         Ok(SearchOptions {

@@ -186,12 +186,9 @@ pub fn parse_setting(spec: &str, warmup: usize) -> anyhow::Result<Setting> {
         ),
         None => (body.trim(), None),
     };
-    let mut rule = RuleSpec::new(name, value).map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?;
-    if let Some(m) = or_verified {
-        rule = rule
-            .or_verified(m)
-            .map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?;
-    }
+    let rule = RuleSpec::new(name, value)
+        .and_then(|r| r.or_verified(or_verified))
+        .map_err(|e| anyhow::anyhow!("`{spec}`: {e}"))?;
     Ok(Setting::new(rule, min_features))
 }
 

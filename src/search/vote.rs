@@ -124,6 +124,17 @@ pub struct Needs {
     pub outside: bool,
 }
 
+impl Needs {
+    /// What two rules read together.
+    pub fn and(self, other: Needs) -> Needs {
+        Needs {
+            top: self.top.max(other.top),
+            squares: self.squares || other.squares,
+            outside: self.outside || other.outside,
+        }
+    }
+}
+
 /// What a stopping rule may read of the votes so far: the running tally, the
 /// leading images, and bounds on what the features left can still change.
 /// The [`Voter`] answers from its histogram; a sharded search answers from

@@ -640,10 +640,7 @@ impl Config {
         if rule.parameter_name().is_none() && s.threshold.is_some() {
             return Err(format!("rule `{}` takes no parameter", rule.name));
         }
-        match s.or_verified {
-            Some(m) => rule.or_verified(m as f64),
-            None => Ok(rule),
-        }
+        rule.or_verified(s.or_verified.map(f64::from))
     }
 
     /// Worker threads: the configured count, or one per core.

@@ -313,12 +313,13 @@ impl LocalizeParams {
                 Some(p) => ApiError::invalid_parameter(&p, e.message),
             })?
         };
-        match &self.or_verified {
-            None => Ok(rule),
-            Some(v) => rule
-                .or_verified(number(OR_VERIFIED, v)?)
-                .map_err(|e| ApiError::invalid_parameter(OR_VERIFIED, e)),
-        }
+        let inliers = self
+            .or_verified
+            .as_deref()
+            .map(|v| number(OR_VERIFIED, v))
+            .transpose()?;
+        rule.or_verified(inliers)
+            .map_err(|e| ApiError::invalid_parameter(OR_VERIFIED, e))
     }
 }
 

@@ -302,9 +302,13 @@ impl RuleSpec {
 
     /// The rule, which also stops once the search's leader is verified with
     /// at least `inliers` inliers against the features voted so far (the
-    /// `verified` rule's check and schedule). Refused for a rule that cannot
-    /// stop early (`none`: use `verified` itself) and for a geometric one.
-    pub fn or_verified(self, inliers: f64) -> Result<Self, String> {
+    /// `verified` rule's check and schedule); with `None`, the rule as it
+    /// is. Refused for a rule that cannot stop early (`none`: use `verified`
+    /// itself) and for a geometric one.
+    pub fn or_verified(self, inliers: Option<f64>) -> Result<Self, String> {
+        let Some(inliers) = inliers else {
+            return Ok(self);
+        };
         let info = self.info();
         if !info.stops_early || info.geometric {
             return Err(format!(

@@ -20,12 +20,7 @@ impl StopRule for OrVerified {
     }
 
     fn needs(&self) -> Needs {
-        let (a, b) = (self.votes.needs(), self.verified.needs());
-        Needs {
-            top: a.top.max(b.top),
-            squares: a.squares || b.squares,
-            outside: a.outside || b.outside,
-        }
+        self.votes.needs().and(self.verified.needs())
     }
 
     /// The vote rule's.

@@ -455,7 +455,7 @@ fn a_vote_rule_or_verified_stops_at_whichever_comes_first() {
     let votes = spec("stable-peak", 50.0);
     let alone = stops_with_check(&votes, &s, None);
     assert!(alone.is_some_and(|t| t > 1), "{alone:?}");
-    let either = votes.clone().or_verified(12.0).unwrap();
+    let either = votes.clone().or_verified(Some(12.0)).unwrap();
     assert!(either.geometric() && !either.shardable());
     assert!(votes.shardable() && !votes.geometric());
     assert_eq!(
@@ -490,12 +490,15 @@ fn a_vote_rule_or_verified_stops_at_whichever_comes_first() {
     assert!(
         RuleSpec::new("none", None)
             .unwrap()
-            .or_verified(12.0)
+            .or_verified(Some(12.0))
             .is_err()
     );
-    assert!(spec("verified", 12.0).or_verified(12.0).is_err());
-    assert!(votes.clone().or_verified(3.0).is_err());
-    assert!(votes.or_verified(12.5).is_err());
+    assert!(spec("verified", 12.0).or_verified(Some(12.0)).is_err());
+    // without inliers, any rule as it is
+    let none = RuleSpec::new("none", None).unwrap();
+    assert_eq!(none.clone().or_verified(None).unwrap(), none);
+    assert!(votes.clone().or_verified(Some(3.0)).is_err());
+    assert!(votes.or_verified(Some(12.5)).is_err());
 }
 
 /// [`stops_on`] a map of `images` images, image j holding only word j, with
