@@ -643,6 +643,14 @@ mod tests {
         assert!(parse_setting("nope=1", 0).is_err());
         assert!(parse_setting("fixed=0.5@x", 0).is_err());
         assert!(parse_setting("fixed=2", 0).is_err());
+        // a vote rule with a verified stop: verified, and labelled so
+        let s = parse_setting("place-z=2+verified=16@20", 0).unwrap();
+        assert_eq!(s.rule.or_verified, Some(16));
+        assert!(s.verify);
+        assert_eq!(s.label(), "place-z 2 or verified 16 w=20 +verify");
+        assert!(parse_setting("place-z=2+verify=16", 0).is_err());
+        assert!(parse_setting("none+verified=16", 0).is_err());
+        assert!(parse_setting("place-z=2+verified=3", 0).is_err());
     }
 
     #[test]
