@@ -6,13 +6,21 @@
 //! features). `scripts/verify-orders.sh` orders the rows as each
 //! verification order would.
 //!
+//! With a fifth argument `descriptors`, each candidate also gets
+//! `desc_inliers`: the inliers of the same fit to descriptor matches (Lowe's
+//! ratio test) instead of word pairs, what a map that kept its descriptors
+//! could verify with; and per query the milliseconds each way took for all
+//! candidates, `words_ms` and `desc_ms` (`scripts/verify-descriptors.sh`).
+//!
 //! ```sh
-//! cargo run --release --example candidates -- ../shared/datasets/gardens-point 5000 1 > candidates.csv
+//! cargo run --release --example candidates -- ../shared/datasets/gardens-point 5000 1 [GRID] [descriptors] > candidates.csv
 //! ```
 use bowloc::eval::cache;
 use bowloc::features::TileGrid;
 use bowloc::features::fit::OpenCvFit;
-use bowloc::geometry::verify::{VerifyParams, rerank, with_keypoints};
+use bowloc::geometry::matches::Correspondences;
+use bowloc::geometry::ratio_matches::{RATIO, ratio_matches};
+use bowloc::geometry::verify::{VerifyParams, count_inliers, rerank, with_keypoints};
 use bowloc::pipeline::code;
 use bowloc::search::rank::top_n;
 use bowloc::search::{HammingWeights, Needs, SearchOptions, Voted, Voter};
@@ -23,20 +31,33 @@ fn main() -> anyhow::Result<()> {
         Some(g) => g.parse().map_err(anyhow::Error::msg)?,
         None => TileGrid::WHOLE,
     };
+    let descriptors = match args.get(5).map(String::as_str) {
+        None => false,
+        Some("descriptors") => true,
+        Some(other) => anyhow::bail!("fifth argument: `descriptors` or nothing, not {other:?}"),
+    };
     let p = cache::prepare_from_args(&args, grid)?;
     bowloc::features::set_opencv_threads(1);
     let params = VerifyParams::default();
     let fit = OpenCvFit::new(params.fit());
     let view = p.map.view();
     let window = SearchOptions::PLACE_WINDOW;
-    println!("seed,query,rank,id,votes,distinct,inliers,verified,correct,features");
+    let desc_column = if descriptors {
+        ",desc_inliers,words_ms,desc_ms"
+    } else {
+        ""
+    };
+    println!("seed,query,rank,id,votes,distinct,inliers,verified,correct,features{desc_column}");
     for q in 0..p.queries.len() {
         let truth = &p.dataset.truth[q];
         if truth.is_empty() {
             continue;
         }
         // a query without features: one row without a candidate
-        let no_candidate = || println!("{},{q},-1,-1,0,0,0,0,0,0", p.vocab.meta().seed);
+        let no_candidate = || {
+            let desc = if descriptors { ",0,0,0" } else { "" };
+            println!("{},{q},-1,-1,0,0,0,0,0,0{desc}", p.vocab.meta().seed)
+        };
         let Some(d) = p.queries.image(q) else {
             no_candidate();
             continue;
@@ -65,6 +86,7 @@ fn main() -> anyhow::Result<()> {
             .collect();
         let keypoints = p.queries.keypoints(q);
         let votes: Vec<(u32, f32)> = top.iter().map(|r| (r.id, r.score)).collect();
+        let started = std::time::Instant::now();
         let reranked = rerank(
             &p.map,
             &votes,
@@ -73,13 +95,43 @@ fn main() -> anyhow::Result<()> {
             &params,
             window,
         );
+        let words_ms = started.elapsed().as_secs_f64() * 1e3;
+        // descriptor matches + the same fit, for each candidate
+        let started = std::time::Instant::now();
+        let desc_inliers: Vec<usize> = if descriptors {
+            top.iter()
+                .map(|r| {
+                    let Some(md) = p.map_descriptors.image(r.id as usize) else {
+                        return 0;
+                    };
+                    let mk = p.map_descriptors.keypoints(r.id as usize);
+                    let m = ratio_matches(d, md, RATIO);
+                    let c = Correspondences {
+                        query: m
+                            .iter()
+                            .map(|&(i, _)| [keypoints[i].x, keypoints[i].y])
+                            .collect(),
+                        map: m.iter().map(|&(_, j)| [mk[j].x, mk[j].y]).collect(),
+                    };
+                    count_inliers(&c, &fit, 0).inliers
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let desc_ms = started.elapsed().as_secs_f64() * 1e3;
         for (rank, r) in top.iter().enumerate() {
             let v = reranked
                 .iter()
                 .find(|x| x.id == r.id)
                 .and_then(|x| x.verification);
+            let desc = if descriptors {
+                format!(",{},{words_ms:.3},{desc_ms:.3}", desc_inliers[rank])
+            } else {
+                String::new()
+            };
             println!(
-                "{},{q},{rank},{},{},{},{},{},{},{}",
+                "{},{q},{rank},{},{},{},{},{},{},{}{desc}",
                 p.vocab.meta().seed,
                 r.id,
                 r.score,

@@ -31,6 +31,7 @@ use bowloc::features::{ExtractConfig, TileGrid};
 use bowloc::geometry::Keypoint;
 use bowloc::geometry::matches::{Correspondences, QueryFeatures, tentative};
 use bowloc::geometry::packed::pack_image;
+use bowloc::geometry::ratio_matches::{RATIO, ratio_matches};
 use bowloc::geometry::verify::{VerifyParams, count_inliers};
 use bowloc::quantize::Quantizer;
 use bowloc::vocabulary::kmeans::KmeansConfig;
@@ -39,32 +40,7 @@ use rayon::prelude::*;
 use std::path::PathBuf;
 
 const WINDOW: i64 = 10;
-const RATIO: f32 = 0.8;
 const WORDS: usize = 5000;
-
-/// Ratio-test matches of `q` against `m` (rows: L2-normalised descriptors).
-fn ratio_matches(q: ArrayView2<'_, f32>, m: ArrayView2<'_, f32>) -> Vec<(usize, usize)> {
-    let sim = q.dot(&m.t()); // cosine; squared distance = 2 − 2·cos
-    let mut out = Vec::new();
-    for (i, row) in sim.outer_iter().enumerate() {
-        let (mut best, mut second, mut at) = (f32::MIN, f32::MIN, 0);
-        for (j, &s) in row.iter().enumerate() {
-            if s > best {
-                second = best;
-                best = s;
-                at = j;
-            } else if s > second {
-                second = s;
-            }
-        }
-        let d1 = (2.0 - 2.0 * best).max(0.0).sqrt();
-        let d2 = (2.0 - 2.0 * second).max(0.0).sqrt();
-        if second > f32::MIN && d1 < RATIO * d2 {
-            out.push((i, at));
-        }
-    }
-    out
-}
 
 fn positions(kps: &[Keypoint], idx: impl Iterator<Item = usize>) -> Vec<[f32; 2]> {
     idx.map(|i| [kps[i].x, kps[i].y]).collect()
@@ -131,7 +107,7 @@ fn main() -> anyhow::Result<()> {
                     let by_words =
                         tentative(&qf, packed, params.max_word_pairs, params.max_hamming);
                     let word_h = count_inliers(&by_words, &fit, 0).inliers;
-                    let m = ratio_matches(qd, md);
+                    let m = ratio_matches(qd, md, RATIO);
                     let c = Correspondences {
                         query: positions(&qk, m.iter().map(|p| p.0)),
                         map: positions(&mk, m.iter().map(|p| p.1)),

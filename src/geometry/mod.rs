@@ -1,12 +1,14 @@
 //! Image geometry as plain numbers: where a feature sits in its image. The
 //! extraction edge fills these from OpenCV's keypoints; the map stores them
 //! per image feature ([`packed`]), and verification matches them between a
-//! query and a candidate ([`matches`], [`verify`]). No OpenCV types here: the
+//! query and a candidate ([`matches`], [`verify`]); [`ratio_matches`] is the
+//! descriptor-matching alternative the examples measure. No OpenCV types here: the
 //! robust model fit is the trait [`verify::ModelFit`], implemented in
 //! `features::fit`.
 
 pub mod matches;
 pub mod packed;
+pub mod ratio_matches;
 pub mod verify;
 
 /// A feature's keypoint in the extraction frame (the downscaled image the
