@@ -11,9 +11,11 @@ build: setup
 run: build
 	./target/release/bowloc serve --config config/default.toml
 
-# Unit, integration and curl-suite tests.
+# Unit, integration and curl-suite tests, then the API docs built with
+# every rustdoc warning (a broken link) an error.
 test: setup
 	cargo test --release
+	RUSTDOCFLAGS="-D warnings" cargo doc --release --no-deps
 
 bench: setup
 	cargo bench

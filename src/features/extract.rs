@@ -65,7 +65,7 @@ impl Frame {
     }
 
     /// FAST corners counted in each of `cores` (frame coordinates), a guess
-    /// of where the keypoints are ([`super::corners`]).
+    /// of where the keypoints are (`src/features/corners.rs`).
     pub fn corners_per_core(
         &self,
         cores: &[(u32, u32, u32, u32)],

@@ -306,7 +306,7 @@ impl Tiles {
         cells(&self.cores)
     }
 
-    /// FAST corners per tile, grid order ([`super::corners`]): counted now
+    /// FAST corners per tile, grid order (`src/features/corners.rs`): counted now
     /// unless the tile order already did; none for an image in one tile,
     /// which has nothing to order.
     pub fn corners(&mut self) -> Result<Vec<f32>, FeatureError> {

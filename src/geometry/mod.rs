@@ -1,7 +1,7 @@
 //! Image geometry as plain numbers: where a feature sits in its image. The
 //! extraction edge fills these from OpenCV's keypoints; the map stores them
 //! per image feature ([`packed`]), and verification matches them between a
-//! query and a candidate ([`matches`], [`verify`]); [`ratio_matches`] is the
+//! query and a candidate ([`matches`](mod@matches), [`verify`]); [`ratio_matches`] is the
 //! descriptor-matching alternative the examples measure. No OpenCV types here: the
 //! robust model fit is the trait [`verify::ModelFit`], implemented in
 //! `features::fit`.
