@@ -1,5 +1,7 @@
 //! Bytes → 8-bit grayscale image, with the format and pixel count checked
-//! from the file header before any pixel is decoded.
+//! from the file header before any pixel is decoded, and a JPEG's end checked
+//! (OpenCV would decode a truncated JPEG, grey below the cut, without a
+//! word).
 
 use super::FeatureError;
 use opencv::core::{Mat, Vector};
@@ -39,7 +41,8 @@ pub const SUPPORTED_FORMATS: &str = "JPEG, PNG, BMP, TIFF, WebP or PNM";
 /// Read the format and size from the header alone, and check them: a format
 /// of [`SUPPORTED_FORMATS`] and at most `limits.max_pixels` pixels. Other
 /// recognised formats (GIF, ...) are [`FeatureError::Unsupported`]; bytes in
-/// no known format, or with a damaged header, [`FeatureError::Undecodable`].
+/// no known format, or with a damaged header, or a JPEG cut short
+/// ([`jpeg_is_complete`]), [`FeatureError::Undecodable`].
 pub fn probe(bytes: &[u8], limits: DecodeLimits) -> Result<(), FeatureError> {
     use imagesize::ImageType;
     if bytes.is_empty() {
@@ -51,6 +54,13 @@ pub fn probe(bytes: &[u8], limits: DecodeLimits) -> Result<(), FeatureError> {
         ))
     };
     match imagesize::image_type(bytes).map_err(|_| undecodable())? {
+        ImageType::Jpeg if !jpeg_is_complete(bytes) => {
+            return Err(FeatureError::Undecodable(
+                "the JPEG ends before its end-of-image marker: it is truncated \
+                 (an upload cut short?)"
+                    .into(),
+            ));
+        }
         ImageType::Jpeg
         | ImageType::Png
         | ImageType::Bmp
@@ -70,6 +80,20 @@ pub fn probe(bytes: &[u8], limits: DecodeLimits) -> Result<(), FeatureError> {
         });
     }
     Ok(())
+}
+
+/// Whether a JPEG's last scan is followed by the end-of-image marker (FF D9).
+/// Inside entropy-coded data an FF byte is always followed by 00 or a restart
+/// marker, so the last start-of-scan (FF DA) is the last scan's and an FF D9
+/// after it is the image's end; bytes after that end are allowed.
+pub fn jpeg_is_complete(bytes: &[u8]) -> bool {
+    let last = |marker: u8| bytes.windows(2).rposition(|w| w == [0xFF, marker]);
+    match (last(0xDA), last(0xD9)) {
+        (Some(scan), Some(end)) => end > scan,
+        // no scan at all: OpenCV reports the damage itself
+        (None, _) => true,
+        (Some(_), None) => false,
+    }
 }
 
 /// Decode an in-memory image to 8-bit grayscale (colour, alpha and 16-bit
@@ -132,5 +156,36 @@ mod tests {
         assert!(probed(gif).starts_with("GIF images are not supported"));
         assert!(probed(b"not an image at all").contains("known format"));
         assert!(probed(b"").contains("empty"));
+    }
+
+    #[test]
+    fn a_truncated_jpeg_is_refused_and_a_whole_one_decodes() {
+        let jpeg = std::fs::read("tests/fixtures/uniform.jpg").unwrap();
+        assert!(decode(&jpeg, DecodeLimits::default()).is_ok());
+        // trailing bytes after the end marker are allowed
+        let mut padded = jpeg.clone();
+        padded.extend_from_slice(b"\0\0trailer");
+        assert!(decode(&padded, DecodeLimits::default()).is_ok());
+        let scan = jpeg.windows(2).rposition(|w| w == [0xFF, 0xDA]).unwrap();
+        for cut in [scan + 2, scan + (jpeg.len() - scan) / 2, jpeg.len() - 1] {
+            match decode(&jpeg[..cut], DecodeLimits::default()) {
+                Err(FeatureError::Undecodable(m)) => assert!(m.contains("truncated"), "{m}"),
+                Err(e) => panic!("cut at {cut}: {e}"),
+                Ok(_) => panic!("cut at {cut} of {} decoded", jpeg.len()),
+            }
+        }
+    }
+
+    #[test]
+    fn jpeg_end_is_the_marker_after_the_last_scan() {
+        let soi = [0xFF, 0xD8];
+        let scan = [0xFF, 0xDA, 0x12, 0xFF, 0x00, 0x34];
+        let eoi = [0xFF, 0xD9];
+        // an embedded thumbnail's scan and end come before the image's
+        let thumb = [&soi[..], &scan, &eoi].concat();
+        assert!(jpeg_is_complete(&[&soi[..], &thumb, &scan, &eoi].concat()));
+        assert!(!jpeg_is_complete(&[&soi[..], &thumb, &scan].concat()));
+        assert!(!jpeg_is_complete(&[&soi[..], &scan].concat()));
+        assert!(jpeg_is_complete(&soi));
     }
 }

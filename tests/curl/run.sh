@@ -290,11 +290,15 @@ expect "unknown query parameter" 400 invalid_parameter "${JPEG[@]}" --data-binar
 expect "unknown route" 404 not_found "$BASE/nowhere"
 expect "wrong method" 405 method_not_allowed "$BASE/localize"
 
-# A JPEG cut after its header decodes as far as the data goes (libjpeg fills
-# the rest): a defined 200 answer on the part that arrived.
+# A JPEG cut after its header would decode (libjpeg fills the rest with
+# grey) and answer from a fraction of the picture: it is refused as
+# truncated instead, and a JPEG with bytes after its end is not.
 head -c 10000 "$IMG" >"$TMP/cut-in-data.jpg"
-status=$(req "$B" "${JPEG[@]}" --data-binary @"$TMP/cut-in-data.jpg" "$BASE/localize")
-check "JPEG cut in its data is answered from what arrived" test "$status/$(jq -r .image.width "$B")" = "200/512"
+expect "JPEG cut in its data" 422 undecodable_image "${JPEG[@]}" --data-binary @"$TMP/cut-in-data.jpg" "$BASE/localize"
+check "JPEG cut in its data is named truncated" grep -q truncated "$B"
+{ cat "$IMG"; printf 'trailing bytes'; } >"$TMP/trailer.jpg"
+status=$(req "$B" "${JPEG[@]}" --data-binary @"$TMP/trailer.jpg" "$BASE/localize")
+check "JPEG with bytes after its end is answered" test "$status/$(jq -r .image.width "$B")" = "200/512"
 
 # --- unusual images (tests/fixtures, made by tests/fixtures/generate.py) ------
 FIX="$ROOT/tests/fixtures"
