@@ -146,6 +146,9 @@ pub struct EvalConfig {
     pub command: String,
     /// OpenCV as loaded (recorded in the outputs).
     pub opencv: OpenCvInfo,
+    /// Also report precision and recall of the top answer kept when its
+    /// distinctness is at least this.
+    pub distinct_cut: Option<f32>,
     /// Also verify the full search and the explicit settings geometrically.
     pub verify: Option<crate::geometry::verify::VerifyParams>,
     /// Images on each side, along the map's order, that belong to an
@@ -669,7 +672,11 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
                     whole_ms: whole_ms.as_ref().map(|w| &w[k][..]),
                 })
                 .collect();
-            summary::summarize(s, &by_seed, &dataset.truth, &tiles_total)
+            let mut summary = summary::summarize(s, &by_seed, &dataset.truth, &tiles_total);
+            summary.at_distinct_cut = config
+                .distinct_cut
+                .map(|cut| summary::at_distinct_cut(&by_seed, &dataset.truth, cut));
+            summary
         })
         .collect();
     let whole_image = whole_runs.zip(whole.as_ref()).map(|(runs, whole)| {

@@ -71,6 +71,8 @@ pub struct RunMetrics {
     /// Recall of the top candidate at 90 % precision when its
     /// distinctness, not its score, is cut ([`crate::search::Ranked::distinct`]).
     pub recall90_top1_distinct: f64,
+    /// The distinctness cut giving it (`None`: no cut reaches the precision).
+    pub cut90_top1_distinct: Option<f32>,
     /// Mean over queries of the fraction of features used.
     pub fraction: f64,
 }
@@ -143,6 +145,13 @@ pub struct SettingSummary {
     pub recall_at_5: Stat,
     /// Recall top-1 @90 % precision by distinctness.
     pub recall90_top1_distinct: Stat,
+    /// The distinctness cut giving it: the least `distinct` of a kept top
+    /// answer (NaN for a seed where a run has no such cut).
+    pub cut90_top1_distinct: Stat,
+    /// The top answer kept when its distinctness reaches a given cut
+    /// (`bowloc eval --distinct-cut`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub at_distinct_cut: Option<DistinctCut>,
     pub fraction: Stat,
     /// Per-query stage times over all seeds, queries and runs, in milliseconds.
     pub time_ms: StageTimes,
@@ -198,6 +207,8 @@ impl SettingSummary {
             recall_at_1: stat(recall_at_1),
             recall_at_5: stat(recall_at_1),
             recall90_top1_distinct: stat(recall90),
+            cut90_top1_distinct: Stat::default(),
+            at_distinct_cut: None,
             fraction: stat(fraction),
             time_ms: StageTimes::default(),
             time_share: TimeShare::default(),
@@ -225,33 +236,91 @@ pub fn run_metrics(outcomes: &[Outcome], truth: &[HashSet<u32>]) -> RunMetrics {
     let answers = answers(outcomes, truth);
     let at = TOP_N.map(|n| metrics::recall_at_precision(&answers, n, PRECISION));
     let fractions: Vec<f64> = outcomes.iter().map(Outcome::fraction).collect();
+    // the top answers ranked by distinctness instead of score
+    let by_distinct = {
+        let ranked = by_distinct(outcomes);
+        let answers: Vec<Answer<'_>> = ranked
+            .iter()
+            .zip(truth)
+            .map(|(candidates, truth)| Answer { candidates, truth })
+            .collect();
+        metrics::recall_at_precision(&answers, 1, PRECISION)
+    };
     RunMetrics {
         recall90: at.map(|r| r.recall),
         cut90: at.map(|r| r.threshold),
         recall_at_1: metrics::recall_at(&answers, 1),
         recall_at_5: metrics::recall_at(&answers, 5),
-        recall90_top1_distinct: {
-            let by_distinct: Vec<Vec<crate::search::Ranked>> = outcomes
-                .iter()
-                .map(|o| {
-                    o.candidates
-                        .iter()
-                        .map(|c| crate::search::Ranked {
-                            score: c.distinct,
-                            ..*c
-                        })
-                        .collect()
-                })
-                .collect();
-            let answers: Vec<Answer<'_>> = by_distinct
-                .iter()
-                .zip(truth)
-                .map(|(candidates, truth)| Answer { candidates, truth })
-                .collect();
-            metrics::recall_at_precision(&answers, 1, PRECISION).recall
-        },
+        recall90_top1_distinct: by_distinct.recall,
+        cut90_top1_distinct: by_distinct.threshold,
         fraction: metrics::mean(&fractions),
     }
+}
+
+/// Precision and recall of the top answer kept when its distinctness is at
+/// least `cut`: a cut chosen on one map, checked on another.
+#[derive(Debug, Clone, Serialize)]
+pub struct DistinctCut {
+    pub cut: f32,
+    /// Of the answers kept, the share that are right (NaN for a run that
+    /// keeps none).
+    pub precision: Stat,
+    /// Of the queries, the share answered right and kept.
+    pub recall: Stat,
+}
+
+/// [`DistinctCut`] of a setting's outcomes on each vocabulary seed.
+pub fn at_distinct_cut(
+    seeds: &[SeedOutcomes<'_>],
+    truth: &[HashSet<u32>],
+    cut: f32,
+) -> DistinctCut {
+    let points: Vec<Vec<metrics::PrPoint>> = seeds
+        .iter()
+        .map(|s| {
+            s.runs
+                .iter()
+                .map(|outcomes| {
+                    let ranked = by_distinct(outcomes);
+                    let answers: Vec<Answer<'_>> = ranked
+                        .iter()
+                        .zip(truth)
+                        .map(|(candidates, truth)| Answer { candidates, truth })
+                        .collect();
+                    metrics::at_threshold(&answers, 1, cut)
+                })
+                .collect()
+        })
+        .collect();
+    let over = |f: &dyn Fn(&metrics::PrPoint) -> f64| {
+        Stat::of(
+            &points
+                .iter()
+                .map(|runs| runs.iter().map(f).collect())
+                .collect::<Vec<Vec<f64>>>(),
+        )
+    };
+    DistinctCut {
+        cut,
+        precision: over(&|p| p.precision.unwrap_or(f64::NAN)),
+        recall: over(&|p| p.recall),
+    }
+}
+
+/// Each query's candidates with their distinctness as the score.
+fn by_distinct(outcomes: &[Outcome]) -> Vec<Vec<crate::search::Ranked>> {
+    outcomes
+        .iter()
+        .map(|o| {
+            o.candidates
+                .iter()
+                .map(|c| crate::search::Ranked {
+                    score: c.distinct,
+                    ..*c
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// One vocabulary's outcomes of a setting, `runs[run][query]`, and what
@@ -314,6 +383,8 @@ pub fn summarize(
         recall_at_1: over(&|m| m.recall_at_1),
         recall_at_5: over(&|m| m.recall_at_5),
         recall90_top1_distinct: over(&|m| m.recall90_top1_distinct),
+        cut90_top1_distinct: over(&|m| m.cut90_top1_distinct.map_or(f64::NAN, f64::from)),
+        at_distinct_cut: None,
         fraction: over(&|m| m.fraction),
         time_ms: timing::summarize(&samples),
         time_share: TimeShare::of(&ms, &full),
@@ -431,5 +502,39 @@ mod tests {
         assert!((r.runs_std - 0.5f64.sqrt() / 2.0).abs() < 1e-12);
         assert_eq!((r.lowest(), r.highest()), (0.5, 1.0));
         assert_eq!(s.runs.len(), 2);
+    }
+
+    #[test]
+    fn a_distinctness_cut_keeps_the_top_answers_at_or_above_it() {
+        let truth: Vec<HashSet<u32>> = vec![[1].into(), [2].into(), [3].into()];
+        // distinctness (= score here) 0.9 right, 0.7 wrong, 0.6 right
+        let runs = vec![vec![
+            outcome(&[(1, 0.9)], 10),
+            outcome(&[(5, 0.7)], 10),
+            outcome(&[(3, 0.6)], 10),
+        ]];
+        let costs = [QueryCost {
+            quantize_ms_per_feature: 0.1,
+        }; 3];
+        let full = vec![vec![21.0; 3]];
+        let seeds = [SeedOutcomes {
+            runs: &runs,
+            costs: &costs,
+            full_ms: &full,
+            whole_ms: None,
+        }];
+        // at 90 % precision only the first answer can be kept: its cut is 0.9
+        let m = run_metrics(&runs[0], &truth);
+        assert_eq!(m.cut90_top1_distinct, Some(0.9));
+        assert!((m.recall90_top1_distinct - 1.0 / 3.0).abs() < 1e-12);
+        let at = |cut| {
+            let c = at_distinct_cut(&seeds, &truth, cut);
+            (c.precision.per_seed[0], c.recall.per_seed[0])
+        };
+        assert_eq!(at(0.9), (1.0, 1.0 / 3.0));
+        assert_eq!(at(0.7), (0.5, 1.0 / 3.0));
+        assert_eq!(at(0.5), (2.0 / 3.0, 2.0 / 3.0));
+        // nothing kept: no precision
+        assert!(at(0.95).0.is_nan());
     }
 }

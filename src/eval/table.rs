@@ -124,7 +124,57 @@ fn paper_rows(columns: &[&SettingSummary], parameter: &str) -> Vec<Vec<String>> 
     rows.push(row("recall top-1 @90%P by distinctness".into(), &|s| {
         pct_seeds(&s.recall90_top1_distinct)
     }));
+    rows.push(row("its distinctness cut, per seed".into(), &|s| {
+        per_seed_cut(&s.cut90_top1_distinct)
+    }));
+    if let Some(cut) = columns.first().and_then(|s| s.at_distinct_cut.as_ref()) {
+        rows.push(row(
+            format!(
+                "top-1 kept at distinctness ≥ {}: precision, per seed",
+                cut.cut
+            ),
+            &|s| {
+                s.at_distinct_cut
+                    .as_ref()
+                    .map_or("–".into(), |c| per_seed_pct(&c.precision))
+            },
+        ));
+        rows.push(row(
+            format!("top-1 kept at distinctness ≥ {}: recall, per seed", cut.cut),
+            &|s| {
+                s.at_distinct_cut
+                    .as_ref()
+                    .map_or("–".into(), |c| per_seed_pct(&c.recall))
+            },
+        ));
+    }
     rows
+}
+
+/// A share per vocabulary seed, in %, "–" where a run had none.
+fn per_seed_pct(s: &Stat) -> String {
+    let values: Vec<String> = s
+        .per_seed
+        .iter()
+        .map(|v| if v.is_nan() { "–".into() } else { pct(*v) })
+        .collect();
+    values.join(" / ")
+}
+
+/// A cut per vocabulary seed, "–" where a run had none.
+fn per_seed_cut(s: &Stat) -> String {
+    let cuts: Vec<String> = s
+        .per_seed
+        .iter()
+        .map(|c| {
+            if c.is_nan() {
+                "–".into()
+            } else {
+                format!("{c:.3}")
+            }
+        })
+        .collect();
+    cuts.join(" / ")
 }
 
 /// The whole markdown report.
