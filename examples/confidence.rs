@@ -41,12 +41,7 @@ fn recall_at_90(tops: &[Option<(u32, f64)>], truth: &[HashSet<u32>]) -> f64 {
                 .collect()
         })
         .collect();
-    let answers: Vec<Answer<'_>> = ranked
-        .iter()
-        .zip(truth)
-        .map(|(candidates, truth)| Answer { candidates, truth })
-        .collect();
-    metrics::recall_at_precision(&answers, 1, 0.9).recall
+    metrics::recall_at_precision(&Answer::all(&ranked, truth), 1, 0.9).recall
 }
 
 fn main() -> anyhow::Result<()> {

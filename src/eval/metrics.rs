@@ -30,7 +30,16 @@ pub struct Answer<'a> {
     pub truth: &'a HashSet<u32>,
 }
 
-impl Answer<'_> {
+impl<'a> Answer<'a> {
+    /// Each query's candidates (`candidates[q]`) next to its truth.
+    pub fn all(candidates: &'a [Vec<Ranked>], truth: &'a [HashSet<u32>]) -> Vec<Self> {
+        candidates
+            .iter()
+            .zip(truth)
+            .map(|(candidates, truth)| Answer { candidates, truth })
+            .collect()
+    }
+
     /// Highest score among the top n: C_q(s) is non-empty iff s ≤ this.
     fn best(&self, n: usize) -> Option<f32> {
         self.candidates

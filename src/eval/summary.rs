@@ -236,16 +236,9 @@ pub fn run_metrics(outcomes: &[Outcome], truth: &[HashSet<u32>]) -> RunMetrics {
     let answers = answers(outcomes, truth);
     let at = TOP_N.map(|n| metrics::recall_at_precision(&answers, n, PRECISION));
     let fractions: Vec<f64> = outcomes.iter().map(Outcome::fraction).collect();
-    // the top answers ranked by distinctness instead of score
-    let by_distinct = {
-        let ranked = by_distinct(outcomes);
-        let answers: Vec<Answer<'_>> = ranked
-            .iter()
-            .zip(truth)
-            .map(|(candidates, truth)| Answer { candidates, truth })
-            .collect();
-        metrics::recall_at_precision(&answers, 1, PRECISION)
-    };
+    let by_distinct = by_distinct(outcomes, truth, |answers| {
+        metrics::recall_at_precision(answers, 1, PRECISION)
+    });
     RunMetrics {
         recall90: at.map(|r| r.recall),
         cut90: at.map(|r| r.threshold),
@@ -281,13 +274,9 @@ pub fn at_distinct_cut(
             s.runs
                 .iter()
                 .map(|outcomes| {
-                    let ranked = by_distinct(outcomes);
-                    let answers: Vec<Answer<'_>> = ranked
-                        .iter()
-                        .zip(truth)
-                        .map(|(candidates, truth)| Answer { candidates, truth })
-                        .collect();
-                    metrics::at_threshold(&answers, 1, cut)
+                    by_distinct(outcomes, truth, |answers| {
+                        metrics::at_threshold(answers, 1, cut)
+                    })
                 })
                 .collect()
         })
@@ -307,9 +296,14 @@ pub fn at_distinct_cut(
     }
 }
 
-/// Each query's candidates with their distinctness as the score.
-fn by_distinct(outcomes: &[Outcome]) -> Vec<Vec<crate::search::Ranked>> {
-    outcomes
+/// `metric` of one run's answers with each candidate's distinctness as its
+/// score.
+fn by_distinct<T>(
+    outcomes: &[Outcome],
+    truth: &[HashSet<u32>],
+    metric: impl FnOnce(&[Answer<'_>]) -> T,
+) -> T {
+    let ranked: Vec<Vec<crate::search::Ranked>> = outcomes
         .iter()
         .map(|o| {
             o.candidates
@@ -320,7 +314,8 @@ fn by_distinct(outcomes: &[Outcome]) -> Vec<Vec<crate::search::Ranked>> {
                 })
                 .collect()
         })
-        .collect()
+        .collect();
+    metric(&Answer::all(&ranked, truth))
 }
 
 /// One vocabulary's outcomes of a setting, `runs[run][query]`, and what
