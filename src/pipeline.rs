@@ -696,11 +696,12 @@ impl Localizer {
         if let Some(trace) = &mut answer.trace {
             trace.frame_side = self.extract.max_side;
         }
-        Ok(if verify {
+        let answer = if verify {
             self.verify(map, answer, &query, options)
         } else {
             answer
-        })
+        };
+        Ok(answer.keeping_distinct(options.min_distinct))
     }
 
     /// Read a file and answer it as a query, extracted in the grid `tiles`

@@ -527,6 +527,27 @@ impl Localization {
         }
     }
 
+    /// Drop the candidates whose distinctness is below `min` and rank the
+    /// others 1, 2, …; `verified` then speaks of the new best candidate.
+    pub fn keeping_distinct(mut self, min: f32) -> Self {
+        if min <= 0.0 {
+            return self;
+        }
+        self.candidates.retain(|c| c.distinct >= min);
+        for (i, c) in self.candidates.iter_mut().enumerate() {
+            c.rank = i + 1;
+        }
+        if self.verified.is_some() {
+            self.verified = Some(
+                self.candidates
+                    .first()
+                    .and_then(|c| c.verified)
+                    .unwrap_or(false),
+            );
+        }
+        self
+    }
+
     /// Add the full search over every feature (traced) to the trace, for
     /// comparison.
     pub fn compare_with_full(&mut self, map: &dyn MapRead, full: SearchOutcome, top_n: usize) {

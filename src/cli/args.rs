@@ -50,13 +50,18 @@ impl ExtractArgs {
     }
 }
 
-/// The rule names with their one-line descriptions, from the registry.
 /// A place window, checked as the configuration checks it.
 pub fn place_window(text: &str) -> Result<u32, String> {
     let window: u32 = text
         .parse()
         .map_err(|e| format!("not a whole number ≥ 0: {e}"))?;
     SearchOptions::check_place_window(window)
+}
+
+/// A distinctness cut, checked as the configuration checks it.
+pub fn min_distinct(text: &str) -> Result<f32, String> {
+    let cut: f64 = text.parse().map_err(|e| format!("not a number: {e}"))?;
+    SearchOptions::check_min_distinct(cut)
 }
 
 /// The tile orders, each with what it does, parsed to a [`TileOrder`].
@@ -133,6 +138,10 @@ pub struct SearchArgs {
     /// Drop candidates scoring below this.
     #[arg(long, default_value_t = SearchOptions::recommended().min_score)]
     pub min_score: f32,
+    /// Drop candidates whose distinctness is below this (0 to 1; 0.6 answers
+    /// only when the leader stands out).
+    #[arg(long, default_value_t = SearchOptions::recommended().min_distinct, value_parser = min_distinct)]
+    pub min_distinct: f32,
     /// Vote plain tf-idf, without weighing votes by Hamming signatures.
     #[arg(long)]
     pub no_hamming: bool,
@@ -182,6 +191,7 @@ impl SearchArgs {
             block: self.block,
             min_features: self.min_features,
             min_score: self.min_score,
+            min_distinct: self.min_distinct,
             deadline: None,
             prior: None,
             hamming: if self.no_hamming {

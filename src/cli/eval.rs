@@ -73,7 +73,7 @@ pub struct EvalArgs {
     /// Also report precision and recall of the top answer kept when its
     /// distinctness is at least this (a cut chosen on another dataset: the
     /// tables print each seed's cut at 90 % precision).
-    #[arg(long, value_parser = distinct_cut)]
+    #[arg(long, value_parser = super::args::min_distinct)]
     distinct_cut: Option<f32>,
     #[command(flatten)]
     extract: ExtractArgs,
@@ -97,14 +97,6 @@ pub struct EvalArgs {
     injections: usize,
     #[command(flatten)]
     model: SequenceArgs,
-}
-
-/// A distinctness cut: a number in [0, 1].
-fn distinct_cut(s: &str) -> Result<f32, String> {
-    match s.parse::<f32>() {
-        Ok(c) if (0.0..=1.0).contains(&c) => Ok(c),
-        _ => Err(format!("a number in [0, 1] (distinctness), not {s:?}")),
-    }
 }
 
 pub fn run(a: EvalArgs) -> anyhow::Result<()> {

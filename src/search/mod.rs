@@ -59,6 +59,11 @@ pub struct SearchOptions {
     pub min_features: usize,
     /// Candidates scoring below this are dropped.
     pub min_score: f32,
+    /// Of the answer's candidates (after verification, if any), those whose
+    /// distinctness ([`Ranked::distinct`]) is below this are dropped: 0 keeps
+    /// all; a cut such as 0.6 answers only when the leader stands out
+    /// (docs/results.md, "A cut to trust an answer by").
+    pub min_distinct: f32,
     /// Give up (returning the answer so far) once this instant passes.
     pub deadline: Option<Instant>,
     /// A prior over map images (a sequence's prediction, a pose
@@ -84,6 +89,7 @@ impl Default for SearchOptions {
             block: 32,
             min_features: 0,
             min_score: 0.0,
+            min_distinct: 0.0,
             deadline: None,
             prior: None,
             hamming: Some(HammingWeights::DEFAULT),
@@ -119,6 +125,19 @@ impl SearchOptions {
             Err(format!(
                 "must be at most {}, got {window}",
                 Self::MAX_PLACE_WINDOW
+            ))
+        }
+    }
+
+    /// `cut` if it is an accepted `min_distinct` (a distinctness, in
+    /// [0, 1]), else why not: the one check behind the configuration, the
+    /// API and `--min-distinct`.
+    pub fn check_min_distinct(cut: f64) -> Result<f32, String> {
+        if (0.0..=1.0).contains(&cut) {
+            Ok(cut as f32)
+        } else {
+            Err(format!(
+                "must be a number in [0, 1] (a distinctness), got {cut}"
             ))
         }
     }

@@ -223,6 +223,8 @@ pub struct SearchDefaults {
     pub min_features: usize,
     pub block: usize,
     pub min_score: f32,
+    /// Candidates less distinct than this are dropped from answers (0: none).
+    pub min_distinct: f32,
     /// `exact` or `tree` (approximate, for vocabularies of 50 000 words and more).
     pub quantizer: String,
     /// Groups the tree quantizer searches per descriptor.
@@ -316,6 +318,7 @@ impl Default for SearchDefaults {
             min_features: o.min_features,
             block: o.block,
             min_score: o.min_score,
+            min_distinct: o.min_distinct,
             quantizer: "exact".into(),
             tree_probes: 16,
             tiles: crate::features::TilePlan {
@@ -535,6 +538,9 @@ impl Config {
                 "search.min_score",
                 format!("must be a finite number ≥ 0, got {}", s.min_score),
             );
+        }
+        if let Err(e) = SearchOptions::check_min_distinct(s.min_distinct.into()) {
+            return bad("search.min_distinct", e);
         }
         if let Err(e) = SearchOptions::check_place_window(s.place_window) {
             return bad("search.place_window", e);

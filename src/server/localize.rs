@@ -64,6 +64,11 @@ pub struct LocalizeParams {
     /// Drop candidates scoring below this (≥ 0).
     #[param(value_type = Option<f32>)]
     pub min_score: Option<String>,
+    /// Drop candidates whose `distinct` is below this (0 to 1; after
+    /// verification, if any): 0.6 answers only when the leader stands out
+    /// of the map. Default: the configured `search.min_distinct`.
+    #[param(value_type = Option<f32>, minimum = 0, maximum = 1)]
+    pub min_distinct: Option<String>,
     /// Features voted before the rule is first consulted (the warm-up).
     /// Defaults to the configured warm-up when the request uses the configured
     /// rule, to 0 when it names another.
@@ -193,6 +198,10 @@ impl LocalizeParams {
                 ));
             }
             o.min_score = s as f32;
+        }
+        if let Some(v) = &self.min_distinct {
+            o.min_distinct = SearchOptions::check_min_distinct(number("min_distinct", v)?)
+                .map_err(|e| ApiError::invalid_parameter("min_distinct", e))?;
         }
         Ok(o)
     }
@@ -837,7 +846,9 @@ mod tests {
 
     #[test]
     fn parameters_are_taken() {
-        let o = parse("top_n=3&rule=hoeffding&delta=0.1&seed=42&min_score=0.2").unwrap();
+        let o = parse("top_n=3&rule=hoeffding&delta=0.1&seed=42&min_score=0.2&min_distinct=0.6")
+            .unwrap();
+        assert_eq!(o.min_distinct, 0.6);
         assert_eq!(o.top_n, 3);
         assert_eq!(o.rule, RuleSpec::new("hoeffding", Some(0.1)).unwrap());
         assert_eq!(o.seed, 42);
@@ -884,6 +895,9 @@ mod tests {
             ("seed=9223372036854775808", "invalid_parameter", "seed"),
             ("min_score=-0.1", "invalid_parameter", "min_score"),
             ("min_score=1e39", "invalid_parameter", "min_score"),
+            ("min_distinct=1.5", "invalid_parameter", "min_distinct"),
+            ("min_distinct=-0.1", "invalid_parameter", "min_distinct"),
+            ("min_distinct=NaN", "invalid_parameter", "min_distinct"),
             (
                 "min_features=2147483648",
                 "invalid_parameter",

@@ -94,6 +94,7 @@ impl AppState {
                 block: s.block,
                 min_features: s.min_features,
                 min_score: s.min_score,
+                min_distinct: s.min_distinct,
                 deadline: None,
                 prior: None,
                 hamming: s.hamming.then_some(crate::search::HammingWeights::DEFAULT),

@@ -183,6 +183,18 @@ check "rule fixed 0.5 uses half the features" jqt --arg s "$status" '
   and .stop.kind == "rule" and .features.used == ((.features.total / 2) | ceil)' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=hoeffding&delta=0.1&min_score=1000")
 check "min_score drops every candidate" test "$status/$(jq '.candidates | length' "$B")" = "200/0"
+# min_distinct keeps, of the same answer, the candidates at least that
+# distinct, ranked again from 1 (with and without verification)
+for v in false true; do
+  req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?top_n=10&seed=7&verify=$v" >/dev/null
+  cp "$B" "$TMP/all.json"
+  cut=$(jq '[.candidates[].distinct] | sort | .[length / 2 | floor]' "$TMP/all.json")
+  status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?top_n=10&seed=7&verify=$v&min_distinct=$cut")
+  check "min_distinct=$cut (verify=$v) keeps the candidates that distinct, ranked from 1" test \
+    "$status/$(jq -c '[.candidates[] | [.rank, .id]]' "$B")" = \
+    "200/$(jq -c --argjson cut "$cut" '[.candidates[] | select(.distinct >= $cut)] | to_entries | map([.key + 1, .value.id])' "$TMP/all.json")"
+done
+check "min_distinct drops at least one candidate" test "$(jq '.candidates | length' "$B")" -lt "$(jq '.candidates | length' "$TMP/all.json")"
 
 # Streaming extraction, the verified stop and the one rule parser.
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=verified&inliers=12&seed=3")
@@ -283,6 +295,7 @@ expect "top_n=0" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE
 expect "top_n huge" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?top_n=99999999999999999999"
 expect "threshold=NaN" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=peak-mean&threshold=NaN"
 expect "threshold=-1" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=peak-mean&threshold=-1"
+expect "min_distinct=2" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?min_distinct=2"
 expect "threshold=abc" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=peak-mean&threshold=abc"
 expect "rule needing a parameter without one" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=hoeffding"
 expect "seed=abc" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?seed=abc"
