@@ -42,7 +42,7 @@ pub const SUPPORTED_FORMATS: &str = "JPEG, PNG, BMP, TIFF, WebP or PNM";
 /// of [`SUPPORTED_FORMATS`] and at most `limits.max_pixels` pixels. Other
 /// recognised formats (GIF, ...) are [`FeatureError::Unsupported`]; bytes in
 /// no known format, or with a damaged header, or a JPEG cut short
-/// ([`jpeg_is_complete`]), [`FeatureError::Undecodable`].
+/// (`jpeg_is_complete`), [`FeatureError::Undecodable`].
 pub fn probe(bytes: &[u8], limits: DecodeLimits) -> Result<(), FeatureError> {
     use imagesize::ImageType;
     if bytes.is_empty() {
