@@ -17,19 +17,13 @@
 #     (default: gardens-point:5000:2x2+24 rtabmap-loop:1000:2x2+24)
 set -euo pipefail
 cd "$(dirname "$0")/.."
+. scripts/lib/candidates.sh
 out=${OUT:-data/eval/verify-descriptors}
-mkdir -p "$out"
-cargo build --release --quiet --example candidates
 sets=("$@")
 [ ${#sets[@]} -gt 0 ] || sets=(gardens-point:5000:2x2+24 rtabmap-loop:1000:2x2+24)
 for set in "${sets[@]}"; do
-  IFS=: read -r name words grid <<<"$set"
-  grid=${grid:-1x1}
-  for seed in 1 2 3; do
-    ./target/release/examples/candidates "../shared/datasets/$name" "$words" "$seed" "$grid" descriptors \
-      >"$out/$name-$words-$grid-$seed.csv" 2>/dev/null
-  done
-  python3 - "$out" "$name-$words-$grid" "$set" <<'PY'
+  candidate_csvs "$out" "$set" descriptors
+  python3 - "$out" "$STEM" "$set" <<'PY'
 import collections, csv, sys
 
 out, stem, label = sys.argv[1:]

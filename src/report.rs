@@ -537,6 +537,11 @@ impl Localization {
         for (i, c) in self.candidates.iter_mut().enumerate() {
             c.rank = i + 1;
         }
+        // a traced answer draws matches only for the candidates it keeps
+        if let Some(trace) = &mut self.trace {
+            let kept = &self.candidates;
+            trace.matches.retain(|m| kept.iter().any(|c| c.id == m.id));
+        }
         if self.verified.is_some() {
             self.verified = Some(
                 self.candidates

@@ -9,7 +9,7 @@
 use super::Report;
 use super::equal_recall::EqualRecall;
 use super::recommend::Criterion;
-use super::summary::{SettingSummary, Stat, TOP_N};
+use super::summary::{DistinctCut, SettingSummary, Stat, TOP_N};
 use super::sweep::{BASELINE, format_parameter};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -125,56 +125,34 @@ fn paper_rows(columns: &[&SettingSummary], parameter: &str) -> Vec<Vec<String>> 
         pct_seeds(&s.recall90_top1_distinct)
     }));
     rows.push(row("its distinctness cut, per seed".into(), &|s| {
-        per_seed_cut(&s.cut90_top1_distinct)
+        per_seed(&s.cut90_top1_distinct, |c| format!("{c:.3}"))
     }));
     if let Some(cut) = columns.first().and_then(|s| s.at_distinct_cut.as_ref()) {
-        rows.push(row(
-            format!(
-                "top-1 kept at distinctness ≥ {}: precision, per seed",
-                cut.cut
-            ),
-            &|s| {
-                s.at_distinct_cut
-                    .as_ref()
-                    .map_or("–".into(), |c| per_seed_pct(&c.precision))
-            },
-        ));
-        rows.push(row(
-            format!("top-1 kept at distinctness ≥ {}: recall, per seed", cut.cut),
-            &|s| {
-                s.at_distinct_cut
-                    .as_ref()
-                    .map_or("–".into(), |c| per_seed_pct(&c.recall))
-            },
-        ));
+        let precision: fn(&DistinctCut) -> &Stat = |c| &c.precision;
+        let recall: fn(&DistinctCut) -> &Stat = |c| &c.recall;
+        for (what, stat) in [("precision", precision), ("recall", recall)] {
+            rows.push(row(
+                format!("top-1 kept at distinctness ≥ {}: {what}, per seed", cut.cut),
+                &|s| {
+                    s.at_distinct_cut
+                        .as_ref()
+                        .map_or("–".into(), |c| per_seed(stat(c), pct))
+                },
+            ));
+        }
     }
     rows
 }
 
-/// A share per vocabulary seed, in %, "–" where a run had none.
-fn per_seed_pct(s: &Stat) -> String {
+/// Each vocabulary seed's value as `show` writes it, "–" where a run had
+/// none (NaN).
+fn per_seed(s: &Stat, show: impl Fn(f64) -> String) -> String {
     let values: Vec<String> = s
         .per_seed
         .iter()
-        .map(|v| if v.is_nan() { "–".into() } else { pct(*v) })
+        .map(|&v| if v.is_nan() { "–".into() } else { show(v) })
         .collect();
     values.join(" / ")
-}
-
-/// A cut per vocabulary seed, "–" where a run had none.
-fn per_seed_cut(s: &Stat) -> String {
-    let cuts: Vec<String> = s
-        .per_seed
-        .iter()
-        .map(|c| {
-            if c.is_nan() {
-                "–".into()
-            } else {
-                format!("{c:.3}")
-            }
-        })
-        .collect();
-    cuts.join(" / ")
 }
 
 /// The whole markdown report.
