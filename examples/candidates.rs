@@ -18,8 +18,7 @@
 use bowloc::eval::cache;
 use bowloc::features::TileGrid;
 use bowloc::features::fit::OpenCvFit;
-use bowloc::geometry::matches::Correspondences;
-use bowloc::geometry::ratio_matches::{RATIO, ratio_matches};
+use bowloc::geometry::ratio_matches::{RATIO, ratio_correspondences};
 use bowloc::geometry::verify::{VerifyParams, count_inliers, rerank, with_keypoints};
 use bowloc::pipeline::code;
 use bowloc::search::rank::top_n;
@@ -105,14 +104,7 @@ fn main() -> anyhow::Result<()> {
                         return 0;
                     };
                     let mk = p.map_descriptors.keypoints(r.id as usize);
-                    let m = ratio_matches(d, md, RATIO);
-                    let c = Correspondences {
-                        query: m
-                            .iter()
-                            .map(|&(i, _)| [keypoints[i].x, keypoints[i].y])
-                            .collect(),
-                        map: m.iter().map(|&(_, j)| [mk[j].x, mk[j].y]).collect(),
-                    };
+                    let c = ratio_correspondences((d, &keypoints), (md, &mk), RATIO);
                     count_inliers(&c, &fit, 0).inliers
                 })
                 .collect()

@@ -29,9 +29,9 @@ use bowloc::eval::cache;
 use bowloc::features::fit::OpenCvFit;
 use bowloc::features::{ExtractConfig, TileGrid};
 use bowloc::geometry::Keypoint;
-use bowloc::geometry::matches::{Correspondences, QueryFeatures, tentative};
+use bowloc::geometry::matches::{QueryFeatures, tentative};
 use bowloc::geometry::packed::pack_image;
-use bowloc::geometry::ratio_matches::{RATIO, ratio_matches};
+use bowloc::geometry::ratio_matches::{RATIO, ratio_correspondences};
 use bowloc::geometry::verify::{VerifyParams, count_inliers};
 use bowloc::quantize::Quantizer;
 use bowloc::vocabulary::kmeans::KmeansConfig;
@@ -41,10 +41,6 @@ use std::path::PathBuf;
 
 const WINDOW: i64 = 10;
 const WORDS: usize = 5000;
-
-fn positions(kps: &[Keypoint], idx: impl Iterator<Item = usize>) -> Vec<[f32; 2]> {
-    idx.map(|i| [kps[i].x, kps[i].y]).collect()
-}
 
 fn main() -> anyhow::Result<()> {
     let root = PathBuf::from(
@@ -107,13 +103,9 @@ fn main() -> anyhow::Result<()> {
                     let by_words =
                         tentative(&qf, packed, params.max_word_pairs, params.max_hamming);
                     let word_h = count_inliers(&by_words, &fit, 0).inliers;
-                    let m = ratio_matches(qd, md, RATIO);
-                    let c = Correspondences {
-                        query: positions(&qk, m.iter().map(|p| p.0)),
-                        map: positions(&mk, m.iter().map(|p| p.1)),
-                    };
+                    let c = ratio_correspondences((qd, &qk), (md, &mk), RATIO);
                     let desc_h = count_inliers(&c, &fit, 0).inliers;
-                    (j, [word_h as f64, m.len() as f64, desc_h as f64])
+                    (j, [word_h as f64, c.len() as f64, desc_h as f64])
                 })
                 .collect()
         })

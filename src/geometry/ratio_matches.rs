@@ -3,6 +3,8 @@
 //! descriptors. The service's maps do not; the examples `overlap` and
 //! `candidates` measure what the alternative would give (docs/results.md).
 
+use super::Keypoint;
+use super::matches::Correspondences;
 use ndarray::ArrayView2;
 
 /// Lowe's ratio: a match is kept when its nearest neighbour is closer than
@@ -38,6 +40,22 @@ pub fn ratio_matches(
     out
 }
 
+/// The positions of the [`ratio_matches`] between a query's and a map
+/// image's descriptors (rows aligned with their keypoints), ready for the
+/// model fit that word pairs go through.
+pub fn ratio_correspondences(
+    query: (ArrayView2<'_, f32>, &[Keypoint]),
+    map: (ArrayView2<'_, f32>, &[Keypoint]),
+    ratio: f32,
+) -> Correspondences {
+    let pairs = ratio_matches(query.0, map.0, ratio);
+    let at = |kps: &[Keypoint], i: usize| [kps[i].x, kps[i].y];
+    Correspondences {
+        query: pairs.iter().map(|&(i, _)| at(query.1, i)).collect(),
+        map: pairs.iter().map(|&(_, j)| at(map.1, j)).collect(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -53,5 +71,23 @@ mod tests {
         assert_eq!(ratio_matches(query.view(), map.view(), RATIO), [(0, 0)]);
         // a single map descriptor has no second neighbour: no match
         assert!(ratio_matches(query.view(), map.slice(ndarray::s![..1, ..]), RATIO).is_empty());
+    }
+
+    #[test]
+    fn correspondences_carry_the_matched_keypoints_positions() {
+        let map = array![[1.0, 0.0], [0.0, 1.0]];
+        let query = array![[0.0, 1.0]];
+        let kp = |x: f32, y: f32| Keypoint {
+            x,
+            y,
+            ..Default::default()
+        };
+        let c = ratio_correspondences(
+            (query.view(), &[kp(5.0, 6.0)]),
+            (map.view(), &[kp(1.0, 2.0), kp(3.0, 4.0)]),
+            RATIO,
+        );
+        assert_eq!(c.query, [[5.0, 6.0]]);
+        assert_eq!(c.map, [[3.0, 4.0]]);
     }
 }
