@@ -47,7 +47,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 fn extract_ms(image: &[u8], c: &ExtractConfig) -> (f64, usize) {
     let start = Instant::now();
     let d = features::extract(
-        &features::decode(image, DecodeLimits::default()).unwrap(),
+        &features::decode(image, DecodeLimits::default(), c.max_side).unwrap(),
         c,
     )
     .unwrap();
@@ -86,7 +86,7 @@ fn tile_plans(images: &[Vec<u8>], c: &ExtractConfig) {
     // per plan, per image: (full cost, keypoints, first unit's cost, its keypoints), in ms
     let mut measured = vec![Vec::new(); plans.len()];
     for image in images {
-        let decoded = features::decode(image, DecodeLimits::default()).unwrap();
+        let decoded = features::decode(image, DecodeLimits::default(), c.max_side).unwrap();
         let mut best = vec![(f64::INFINITY, 0usize, 0.0, 0usize); plans.len()];
         for _round in 0..3 {
             for (p, plan) in plans.iter().enumerate() {
@@ -179,8 +179,8 @@ fn extract(c: &mut Criterion) {
         });
     }
     group.finish();
-    let decoded = features::decode(&images[0], DecodeLimits::default()).unwrap();
     let cfg = config(640);
+    let decoded = features::decode(&images[0], DecodeLimits::default(), cfg.max_side).unwrap();
     let mut group = c.benchmark_group("tile-order/gardens-point");
     group.sample_size(20);
     for order in [TileOrder::Random, TileOrder::Richest] {

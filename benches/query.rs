@@ -138,9 +138,9 @@ fn query(c: &mut Criterion) {
     group.sample_size(10);
     let q = &queries[0];
     group.bench_function("decode", |b| {
-        b.iter(|| features::decode(q, DecodeLimits::default()).unwrap())
+        b.iter(|| features::decode(q, DecodeLimits::default(), config.max_side).unwrap())
     });
-    let image = features::decode(q, DecodeLimits::default()).unwrap();
+    let image = features::decode(q, DecodeLimits::default(), config.max_side).unwrap();
     group.bench_function("extract", |b| {
         b.iter(|| features::extract(&image, config).unwrap())
     });

@@ -162,16 +162,17 @@ pub fn extract_all_timed(
         .par_iter()
         .map(|image| {
             let started = ThreadTime::now();
-            let r = features::decode_file(&image.path, limits).and_then(|decoded| {
-                let read = started.elapsed();
-                let (features, tiles) = extract_tiled(&decoded, config, grid)?;
-                Ok(Extracted {
-                    features,
-                    decode: read,
-                    extract: started.elapsed() - read,
-                    tiles,
-                })
-            });
+            let r =
+                features::decode_file(&image.path, limits, config.max_side).and_then(|decoded| {
+                    let read = started.elapsed();
+                    let (features, tiles) = extract_tiled(&decoded, config, grid)?;
+                    Ok(Extracted {
+                        features,
+                        decode: read,
+                        extract: started.elapsed() - read,
+                        tiles,
+                    })
+                });
             bar.inc(1);
             r
         })
@@ -442,8 +443,9 @@ impl Localizer {
     /// whole image extracted with the vocabulary's settings and exactly
     /// quantized, as `bowloc map build` indexes it.
     pub fn map_features(&self, bytes: &[u8]) -> Result<Vec<PackedFeature>, FeatureError> {
-        let image = features::decode(bytes, self.limits)?;
-        let f = features::extract(&image, &self.vocab.meta().extract)?;
+        let config = &self.vocab.meta().extract;
+        let image = features::decode(bytes, self.limits, config.max_side)?;
+        let f = features::extract(&image, config)?;
         Ok(map_image_words(&self.vocab, "", Some(&f)).geometry)
     }
 
@@ -592,7 +594,7 @@ impl Localizer {
             false => (options.clone(), options),
         };
         let started = Instant::now();
-        let image = features::decode(bytes, self.limits)?;
+        let image = features::decode(bytes, self.limits, self.extract.max_side)?;
         let decoded = Instant::now();
         let size = ImageSize {
             width: image.width(),

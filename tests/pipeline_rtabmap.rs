@@ -298,7 +298,7 @@ fn streaming_plans_find_the_whole_images_keypoints() {
     let data = Dataset::open(&common::dataset("rtabmap-loop")).unwrap();
     let config = ExtractConfig::default();
     for query in data.queries.iter().step_by(11) {
-        let image: GrayImage = decode_file(&query.path, DecodeLimits::default()).unwrap();
+        let image: GrayImage = decode_file(&query.path, DecodeLimits::default(), 0).unwrap();
         let (whole, _) = extract_tiled(&image, &config, TileGrid::WHOLE).unwrap();
         assert!(
             whole.len() > 100,

@@ -48,7 +48,11 @@ impl Frame {
     /// Downscale `image` and prepare the detector. `max_features` overrides
     /// the configured cap (a tile keeps its share of the image's cap).
     pub fn new(image: &GrayImage, config: &ExtractConfig) -> Result<Self, FeatureError> {
-        let mat = downscale(&image.0, config.max_side)?;
+        let mat = downscale(
+            &image.pixels,
+            [image.width(), image.height()],
+            config.max_side,
+        )?;
         let p = &config.sift;
         let sift = SIFT::create(
             0,
@@ -237,19 +241,21 @@ pub fn extract_file(
     config: &ExtractConfig,
     limits: DecodeLimits,
 ) -> Result<Features, FeatureError> {
-    extract(&decode_file(path, limits)?, config)
+    extract(&decode_file(path, limits, config.max_side)?, config)
 }
 
-/// `mat` downscaled (area interpolation) so its longer side is at most
-/// `max_side` (0: unchanged): the frame SIFT sees, and the one thumbnails
-/// of that size show.
-pub(super) fn downscale(mat: &Mat, max_side: u32) -> Result<Mat, FeatureError> {
-    let Some(size) = downscale_size(mat.cols().max(0) as u32, mat.rows().max(0) as u32, max_side)
-    else {
+/// The frame of an image of `size` (width, height) whose longer side is at
+/// most `max_side` (0: unchanged), area-interpolated from `mat`: the image's
+/// pixels at that size or decoded smaller ([`super::decode`]). The frame SIFT
+/// sees, and the one thumbnails of that size show.
+pub(super) fn downscale(mat: &Mat, size: [u32; 2], max_side: u32) -> Result<Mat, FeatureError> {
+    let frame = downscale_size(size[0], size[1], max_side)
+        .unwrap_or(Size::new(size[0] as i32, size[1] as i32));
+    if mat.size()? == frame {
         return Ok(mat.clone());
-    };
+    }
     let mut out = Mat::default();
-    opencv::imgproc::resize(mat, &mut out, size, 0.0, 0.0, opencv::imgproc::INTER_AREA)?;
+    opencv::imgproc::resize(mat, &mut out, frame, 0.0, 0.0, opencv::imgproc::INTER_AREA)?;
     Ok(out)
 }
 

@@ -3,7 +3,7 @@
 //! size, encode as JPEG.
 
 use super::FeatureError;
-use super::decode::{DecodeLimits, decode_as};
+use super::decode::{Colour, DecodeLimits, decode_as};
 use super::extract::downscale;
 use opencv::core::Vector;
 use opencv::prelude::*;
@@ -19,8 +19,9 @@ pub fn thumbnail(
     max_side: u32,
     limits: DecodeLimits,
 ) -> Result<Vec<u8>, FeatureError> {
-    let image = decode_as(bytes, limits, opencv::imgcodecs::IMREAD_COLOR)?;
-    let small = downscale(&image, max_side.max(1))?;
+    let side = max_side.max(1);
+    let (image, size) = decode_as(bytes, limits, Colour::Bgr, side)?;
+    let small = downscale(&image, size, side)?;
     let mut jpeg = Vector::<u8>::new();
     let params = Vector::<i32>::from_slice(&[opencv::imgcodecs::IMWRITE_JPEG_QUALITY, QUALITY]);
     opencv::imgcodecs::imencode(".jpg", &small, &mut jpeg, &params)?;
