@@ -2,7 +2,8 @@
 //! vocabulary seed, each query is searched in full (whole image, Hamming
 //! weights) and its top 10 candidates verified as the service verifies them.
 //! One CSV row per candidate: its vote rank, vote score, distinctness,
-//! inliers and whether it is a true match (rank -1: a query without
+//! inliers, whether it is a true match and the relative scale its inliers
+//! show (`geometry::relative_scale`, 1 without one; rank -1: a query without
 //! features). `scripts/verify-orders.sh` orders the rows as each
 //! verification order would.
 //!
@@ -19,6 +20,7 @@ use bowloc::eval::cache;
 use bowloc::features::TileGrid;
 use bowloc::features::fit::OpenCvFit;
 use bowloc::geometry::ratio_matches::{RATIO, ratio_correspondences};
+use bowloc::geometry::relative_scale::relative_scale;
 use bowloc::geometry::verify::{VerifyParams, count_inliers, rerank, with_keypoints};
 use bowloc::pipeline::code;
 use bowloc::search::rank::top_n;
@@ -46,7 +48,9 @@ fn main() -> anyhow::Result<()> {
     } else {
         ""
     };
-    println!("seed,query,rank,id,votes,distinct,inliers,verified,correct,features{desc_column}");
+    println!(
+        "seed,query,rank,id,votes,distinct,inliers,verified,correct,features,scale{desc_column}"
+    );
     for q in 0..p.queries.len() {
         let truth = &p.dataset.truth[q];
         if truth.is_empty() {
@@ -55,7 +59,7 @@ fn main() -> anyhow::Result<()> {
         // a query without features: one row without a candidate
         let no_candidate = || {
             let desc = if descriptors { ",0,0,0" } else { "" };
-            println!("{},{q},-1,-1,0,0,0,0,0,0{desc}", p.vocab.meta().seed)
+            println!("{},{q},-1,-1,0,0,0,0,0,0,1{desc}", p.vocab.meta().seed)
         };
         let Some(d) = p.queries.image(q) else {
             no_candidate();
@@ -113,17 +117,18 @@ fn main() -> anyhow::Result<()> {
         };
         let desc_ms = started.elapsed().as_secs_f64() * 1e3;
         for (rank, r) in top.iter().enumerate() {
-            let v = reranked
-                .iter()
-                .find(|x| x.id == r.id)
-                .and_then(|x| x.verification);
+            let x = reranked.iter().find(|x| x.id == r.id);
+            let v = x.and_then(|x| x.verification);
+            let scale = x
+                .and_then(|x| relative_scale(&x.inlier_pairs))
+                .unwrap_or(1.0);
             let desc = if descriptors {
                 format!(",{},{words_ms:.3},{desc_ms:.3}", desc_inliers[rank])
             } else {
                 String::new()
             };
             println!(
-                "{},{q},{rank},{},{},{},{},{},{},{}{desc}",
+                "{},{q},{rank},{},{},{},{},{},{},{},{scale}{desc}",
                 p.vocab.meta().seed,
                 r.id,
                 r.score,

@@ -592,7 +592,8 @@ impl Localization {
             .take(top_n)
             .enumerate()
             .map(|(i, r)| {
-                let mut c = Candidate::new(i + 1, r.score(), distinct(r.id), map.image(r.id));
+                let mut c =
+                    Candidate::new(i + 1, r.score(), distinct(r.distinct_from), map.image(r.id));
                 c.votes = Some(r.votes);
                 c.inliers = r.verification.map(|v| v.inliers as u32);
                 c.verified = r.verification.map(|v| v.verified);

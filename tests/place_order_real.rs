@@ -2,7 +2,8 @@
 //! whole queries, the full search): ordering the verified candidates by the
 //! inliers of their place, their own plus their checked neighbours' along
 //! the map, gives a better recall@1 than ordering them by their own inliers,
-//! and keeps the votes' recall@1.
+//! and keeps the votes' recall@1; answering for the place with its verified
+//! image seen at the query's scale (`place-scale`) does better still.
 
 mod common;
 
@@ -15,13 +16,16 @@ use bowloc::search::{RuleSpec, SearchOptions, search_words};
 
 /// Printed by this test on an Intel Xeon with AVX-512 (`cargo test --release
 /// --test place_order_real -- --nocapture`): recall@1 0.790 by votes, 0.730
-/// by own inliers, 0.785 by place inliers (vocabulary seed 1). Over seeds 1 /
+/// by own inliers, 0.785 by place inliers, 0.815 place-scale (vocabulary seed
+/// 1). Over seeds 1 /
 /// 2 / 3, `scripts/verify-orders.sh gardens-point:1000` printed 79.0 / 81.0 /
 /// 84.0 % by votes, 73.0 / 78.0 / 77.0 by own inliers and 78.5 / 83.5 / 81.0
 /// by place inliers; at K = 5000 the place order is also the best of the
 /// three on the worst seed (docs/results.md, "Place inliers").
 const MIN_GAIN_OVER_OWN_INLIERS: f64 = 0.03;
 const MAX_LOSS_TO_VOTES: f64 = 0.02;
+/// What `place-scale` must add to the place order's recall@1.
+const MIN_GAIN_OF_SCALE: f64 = 0.02;
 
 #[test]
 fn the_place_order_beats_own_inliers_on_gardens_point() {
@@ -37,8 +41,8 @@ fn the_place_order_beats_own_inliers_on_gardens_point() {
         top_n: VerifyParams::default().top_k,
         ..SearchOptions::default()
     };
-    let orders = [Order::Inliers, Order::Place];
-    let (mut answered, mut by_votes, mut by_order) = (0usize, 0usize, [0usize; 2]);
+    let orders = [Order::Inliers, Order::Place, Order::PlaceScale];
+    let (mut answered, mut by_votes, mut by_order) = (0usize, 0usize, [0usize; 3]);
     for (q, (words, features)) in query_words.iter().zip(&query_features).enumerate() {
         let truth = &data.truth[q];
         if truth.is_empty() {
@@ -71,9 +75,14 @@ fn the_place_order_beats_own_inliers_on_gardens_point() {
     }
     let recall = |n: usize| n as f64 / answered as f64;
     let (votes, own, place) = (recall(by_votes), recall(by_order[0]), recall(by_order[1]));
+    let scale = recall(by_order[2]);
     println!(
         "gardens-point, full search, K = 1000, seed 1: recall@1 {votes:.3} by votes, \
-         {own:.3} by own inliers, {place:.3} by place inliers"
+         {own:.3} by own inliers, {place:.3} by place inliers, {scale:.3} place-scale"
+    );
+    assert!(
+        scale >= place + MIN_GAIN_OF_SCALE,
+        "place-scale {scale:.3} vs place {place:.3}"
     );
     assert!(
         place >= own + MIN_GAIN_OVER_OWN_INLIERS,

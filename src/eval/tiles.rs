@@ -200,7 +200,7 @@ impl Query {
                 .map(|r| Ranked {
                     id: r.id,
                     score: r.score(),
-                    distinct: search::rank::distinct_of(&outcome.candidates, r.id),
+                    distinct: search::rank::distinct_of(&outcome.candidates, r.distinct_from),
                 })
                 .collect();
             verify_ms += started.elapsed().as_secs_f64() * 1e3;

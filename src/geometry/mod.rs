@@ -2,13 +2,15 @@
 //! extraction edge fills these from OpenCV's keypoints; the map stores them
 //! per image feature ([`packed`]), and verification matches them between a
 //! query and a candidate ([`matches`](mod@matches), [`verify`]); [`ratio_matches`] is the
-//! descriptor-matching alternative the examples measure. No OpenCV types here: the
+//! descriptor-matching alternative the examples measure; [`relative_scale`] reads from
+//! the matched points how much larger a map image sees the scene. No OpenCV types here: the
 //! robust model fit is the trait [`verify::ModelFit`], implemented in
 //! `features::fit`.
 
 pub mod matches;
 pub mod packed;
 pub mod ratio_matches;
+pub mod relative_scale;
 pub mod verify;
 
 /// A feature's keypoint in the extraction frame (the downscaled image the

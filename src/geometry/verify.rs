@@ -9,6 +9,7 @@
 use super::Keypoint;
 use super::matches::{Correspondences, QueryFeature, QueryFeatures, tentative};
 use super::packed::PackedFeature;
+use super::relative_scale::relative_scale;
 use crate::index::MapRead;
 use crate::search::{LeaderCheck, Voted};
 use serde::{Deserialize, Serialize};
@@ -50,17 +51,29 @@ pub enum Order {
     /// see the same place, so their inliers add up to evidence for it where
     /// one image's inliers are few (docs/results.md, "Place inliers").
     Place,
+    /// [`Order::Place`], then the first place answers with its verified
+    /// candidate whose inliers show the scene at the scale nearest the
+    /// query's ([`super::relative_scale`]): of the map images that see the
+    /// place, the one taken nearest the query along the way. It keeps the
+    /// place's score.
+    PlaceScale,
 }
 
 impl Order {
     /// Every order, the default first.
-    pub const ALL: [Order; 3] = [Order::Place, Order::Inliers, Order::Verified];
+    pub const ALL: [Order; 4] = [
+        Order::PlaceScale,
+        Order::Place,
+        Order::Inliers,
+        Order::Verified,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
             Self::Inliers => "inliers",
             Self::Verified => "verified",
             Self::Place => "place",
+            Self::PlaceScale => "place-scale",
         }
     }
 
@@ -70,6 +83,10 @@ impl Order {
             Self::Place => {
                 "by the inliers of the candidate and of the checked candidates within the \
                  place window of it, most first"
+            }
+            Self::PlaceScale => {
+                "as place, then the first place answers with its verified candidate whose \
+                 inliers show the scene at the scale nearest the query's"
             }
             Self::Inliers => "by the candidate's own inliers, most first",
             Self::Verified => {
@@ -196,7 +213,7 @@ impl Default for VerifyParams {
             min_inliers: 12,
             max_word_pairs: 4,
             max_hamming: 16,
-            order: Order::Place,
+            order: Order::PlaceScale,
             model: Model::Homography,
             estimator: Estimator::Magsac,
             threshold_px: 8.0,
@@ -428,6 +445,10 @@ pub struct Reranked {
     pub verification: Option<Verification>,
     /// The pairs the fit took as inliers (empty unless it verified some).
     pub inlier_pairs: Correspondences,
+    /// The candidate whose vote distinctness this one's answer carries: its
+    /// own id, or that of the place's leader it was moved ahead of
+    /// ([`Order::PlaceScale`]), as it carries the place's score.
+    pub distinct_from: u32,
 }
 
 impl Reranked {
@@ -473,6 +494,7 @@ pub fn rerank(
                 score: verification.map_or(0.0, |v| v.inliers as f32),
                 verification,
                 inlier_pairs,
+                distinct_from: id,
             }
         })
         .collect();
@@ -480,7 +502,7 @@ pub fn rerank(
     match params.order {
         Order::Inliers => out[..k].sort_by_key(|r| std::cmp::Reverse(r.inliers())),
         Order::Verified => out[..k].sort_by_key(|r| !r.verification.is_some_and(|v| v.verified)),
-        Order::Place => {
+        Order::Place | Order::PlaceScale => {
             let place: Vec<usize> = out[..k]
                 .iter()
                 .map(|r| {
@@ -501,9 +523,33 @@ pub fn rerank(
                     .total_cmp(&a.score)
                     .then(b.inliers().cmp(&a.inliers()))
             });
+            if params.order == Order::PlaceScale {
+                nearest_scale_first(&mut out[..k], place_window);
+            }
         }
     }
     out
+}
+
+/// Move to the front the verified candidate of the first one's place (within
+/// `place_window` of it) whose inliers show the scene at the relative scale
+/// nearest 1 (equal ones in their order); it takes the first one's score
+/// and distinctness, the place's.
+fn nearest_scale_first(ranked: &mut [Reranked], place_window: u32) {
+    let Some(first) = ranked.first() else { return };
+    let (leader, score, distinct_from) = (first.id, first.score, first.distinct_from);
+    let nearest = ranked
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| r.id.abs_diff(leader) <= place_window)
+        .filter(|(_, r)| r.verification.is_some_and(|v| v.verified))
+        .filter_map(|(i, r)| Some((i, relative_scale(&r.inlier_pairs)?.ln().abs())))
+        .min_by(|a, b| a.1.total_cmp(&b.1));
+    if let Some((i, _)) = nearest {
+        ranked[..=i].rotate_right(1);
+        ranked[0].score = score;
+        ranked[0].distinct_from = distinct_from;
+    }
 }
 
 #[cfg(test)]
@@ -633,6 +679,90 @@ mod tests {
         // image 4 is 3 images from image 1: their places overlap with a
         // window of 3
         assert_eq!(ranked(Order::Place, 3), [(1, 47.0), (4, 33.0), (0, 27.0)]);
+    }
+
+    #[test]
+    fn the_place_scale_order_answers_with_the_image_seen_at_the_query_scale() {
+        use crate::index::{ImageWords, MapBuilder};
+        // one place of three map images, seeing the query's scene at 0.7,
+        // 1.05 and 1.5 times its size with 20, 14 and 16 shared words; image
+        // 5 is another place, whose 5 shared words lie on a line (no inliers;
+        // 3 and 4 share nothing)
+        let images: [(std::ops::Range<u32>, f32); 6] = [
+            (0..20, 0.7),
+            (0..14, 1.05),
+            (0..16, 1.5),
+            (60..61, 1.0),
+            (61..62, 1.0),
+            (20..25, 1.0),
+        ];
+        let mut b = MapBuilder::new(64);
+        for (j, (words, scale)) in images.iter().enumerate() {
+            let words: Vec<u32> = words.clone().collect();
+            let kps: Vec<Keypoint> = words
+                .iter()
+                .map(|&w| {
+                    let k = grid_keypoint(w);
+                    Keypoint {
+                        x: k.x * scale + 40.0,
+                        y: k.y * scale + 10.0,
+                        ..k
+                    }
+                })
+                .collect();
+            b.add(ImageWords::with_geometry(format!("{j}"), &words, &[], &kps));
+        }
+        let map = b.build("m", "v", None);
+        let query: Vec<QueryFeature> = (0..25).map(|w| (w, grid_keypoint(w)).into()).collect();
+        let fit = AllInliers(VerifyParams::default().fit());
+        let votes = [(5, 0.9), (0, 0.8), (2, 0.7), (1, 0.6)];
+        let ranked = |order: Order, window: u32| -> Vec<(u32, f32)> {
+            let params = VerifyParams {
+                order,
+                ..Default::default()
+            };
+            rerank(&map, &votes, &query, &fit, &params, window)
+                .iter()
+                .map(|r| (r.id, r.score()))
+                .collect()
+        };
+        // the place order puts image 0 first (the most inliers of its own
+        // among equal sums); place-scale answers with image 1, at the place's
+        // score
+        assert_eq!(
+            ranked(Order::Place, 2),
+            [(0, 50.0), (2, 50.0), (1, 50.0), (5, 0.0)]
+        );
+        assert_eq!(
+            ranked(Order::PlaceScale, 2),
+            [(1, 50.0), (0, 50.0), (2, 50.0), (5, 0.0)]
+        );
+        // and it answers with the distinctness of the leader it displaced
+        let params = VerifyParams {
+            order: Order::PlaceScale,
+            ..Default::default()
+        };
+        let out = rerank(&map, &votes, &query, &fit, &params, 2);
+        let from: Vec<(u32, u32)> = out.iter().map(|r| (r.id, r.distinct_from)).collect();
+        assert_eq!(from, [(1, 0), (0, 0), (2, 2), (5, 5)]);
+        // an unverified candidate is not a choice: with 14 inliers needed
+        // image 1 still is, with 15 it is not and image 0 (0.7) stays ahead
+        // of image 2 (1.5)
+        let with_min = |min_inliers: usize| -> Vec<u32> {
+            let params = VerifyParams {
+                order: Order::PlaceScale,
+                min_inliers,
+                ..Default::default()
+            };
+            rerank(&map, &votes, &query, &fit, &params, 2)
+                .iter()
+                .map(|r| r.id)
+                .collect()
+        };
+        assert_eq!(with_min(14), [1, 0, 2, 5]);
+        assert_eq!(with_min(15), [0, 2, 1, 5]);
+        // a window of 0: each image its own place, image 0 leads alone
+        assert_eq!(ranked(Order::PlaceScale, 0)[0], (0, 20.0));
     }
 
     #[test]
