@@ -580,12 +580,8 @@ impl Localization {
         min_score: f32,
         elapsed: Duration,
     ) -> Self {
-        let distinct = |id: u32| {
-            self.candidates
-                .iter()
-                .find(|c| c.id == id)
-                .map_or(0.0, |c| c.distinct)
-        };
+        let voted = |id: u32| self.candidates.iter().find(|c| c.id == id);
+        let distinct = |id: u32| voted(id).map_or(0.0, |c| c.distinct);
         self.candidates = reranked
             .iter()
             .filter(|r| r.score() >= min_score)
@@ -597,6 +593,8 @@ impl Localization {
                 c.votes = Some(r.votes);
                 c.inliers = r.verification.map(|v| v.inliers as u32);
                 c.verified = r.verification.map(|v| v.verified);
+                // a posterior (rule `posterior`, a sequence) stays the image's
+                c.probability = voted(r.id).and_then(|v| v.probability);
                 c
             })
             .collect();

@@ -209,7 +209,11 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
     let file = by_id(&client, "file").await;
     file.send_keys(query.to_str().unwrap()).await.unwrap();
     by_id(&client, "seed").await.send_keys("3").await.unwrap();
-    click(&client, "verify").await;
+    // geometric verification is ticked by default, as the service does
+    assert_eq!(
+        js(&client, "return document.getElementById('verify').checked").await,
+        json!(true)
+    );
     click(&client, "submit").await;
     wait_until("the candidates", Duration::from_secs(30), || async {
         js(
@@ -242,7 +246,17 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
             == json!(true)
     })
     .await;
-    // the vote race was drawn: the chart says so and has ink on it
+    // the vote race was drawn (after the top candidate's matches, whose
+    // images load first): the chart says so and has ink on it
+    wait_until("the vote race", Duration::from_secs(15), || async {
+        js(
+            &client,
+            "return document.getElementById('race-chart').dataset.drawn === 'true'",
+        )
+        .await
+            == json!(true)
+    })
+    .await;
     let drawn = js(
         &client,
         "const c = document.getElementById('race-chart'); \
