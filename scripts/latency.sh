@@ -3,7 +3,9 @@
 # request at a time against a live `bowloc serve` on loopback (default rule
 # and configuration), comparing curl's total time with the SIFT extraction
 # time the answer reports. Prints medians and the share of the request that
-# is not SIFT extraction. Then, in the same run, each query twice in turn:
+# is not SIFT extraction (and how many answers were geometrically verified,
+# as the configuration has it by default). Then, in the same run, each query
+# twice in turn:
 # the full search on the whole image (rule=none&tiles=1x1, what streaming and
 # stopping save against) and the default configuration (streaming
 # extraction, default rule): both medians, their ratio and the median of the
@@ -43,7 +45,8 @@ for pass in 1 2 3; do
     client=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
       --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass${extra:+&$extra}")
     jq -r --arg c "$client" '[($c | tonumber) * 1000, .timings_ms.decode, .timings_ms.extract,
-      .timings_ms.quantize, .timings_ms.vote, .timings_ms.total, .features.fraction] | @tsv' \
+      .timings_ms.quantize, .timings_ms.vote, .timings_ms.total, .features.fraction,
+      (.timings_ms.verify // 0), (if .verified == null then "no" else "yes" end)] | @tsv' \
       "$tmp/answer.json" >>"$tmp/rows"
   done
 done
@@ -51,7 +54,8 @@ median() { sort -g | awk '{v[NR] = $1} END {print v[int((NR + 1) / 2)]}'; }
 col() { cut -f"$1" "$tmp/rows" | median; }
 share=$(awk -F'\t' '{print 100 * ($1 - $3) / $1}' "$tmp/rows" | median)
 echo "dataset=$name requests=$(wc -l <"$tmp/rows") rule=$(jq -r '.rule.name + " " + (.rule.value | tostring)' "$tmp/answer.json")"
-echo "median_ms request=$(col 1) decode=$(col 2) extract=$(col 3) quantize=$(col 4) vote=$(col 5) server_total=$(col 6) fraction_used=$(col 7)"
+echo "median_ms request=$(col 1) decode=$(col 2) extract=$(col 3) quantize=$(col 4) vote=$(col 5) verify=$(col 8) server_total=$(col 6) fraction_used=$(col 7)"
+echo "verified (geometric verification ran): $(cut -f9 "$tmp/rows" | grep -c yes) of $(wc -l <"$tmp/rows") requests"
 echo "median share of a request that is not SIFT extraction: ${share}%"
 : >"$tmp/pairs"
 for pass in 1 2 3; do
