@@ -646,6 +646,37 @@ mod tests {
         assert!(out[1].inlier_pairs.is_empty());
     }
 
+    /// Default settings with verification `order`.
+    fn in_order(order: Order) -> VerifyParams {
+        VerifyParams {
+            order,
+            ..Default::default()
+        }
+    }
+
+    /// [`rerank`] with a fit that calls every pair an inlier.
+    fn all_inliers(
+        map: &dyn MapRead,
+        votes: &[(u32, f32)],
+        query: &[QueryFeature],
+        params: VerifyParams,
+        window: u32,
+    ) -> Vec<Reranked> {
+        rerank(
+            map,
+            votes,
+            query,
+            &AllInliers(params.fit()),
+            &params,
+            window,
+        )
+    }
+
+    /// (id, score) of each re-ranked candidate.
+    fn scores(ranked: &[Reranked]) -> Vec<(u32, f32)> {
+        ranked.iter().map(|r| (r.id, r.score())).collect()
+    }
+
     #[test]
     fn the_place_order_adds_up_the_inliers_of_neighbouring_images() {
         use crate::index::{ImageWords, MapBuilder};
@@ -660,17 +691,9 @@ mod tests {
         }
         let map = b.build("m", "v", None);
         let query: Vec<QueryFeature> = (0..47).map(|w| (w, grid_keypoint(w)).into()).collect();
-        let fit = AllInliers(VerifyParams::default().fit());
         let votes = [(4, 0.9), (1, 0.5), (0, 0.4)];
-        let ranked = |order: Order, window: u32| -> Vec<(u32, f32)> {
-            let params = VerifyParams {
-                order,
-                ..Default::default()
-            };
-            rerank(&map, &votes, &query, &fit, &params, window)
-                .iter()
-                .map(|r| (r.id, r.score()))
-                .collect()
+        let ranked = |order: Order, window: u32| {
+            scores(&all_inliers(&map, &votes, &query, in_order(order), window))
         };
         assert_eq!(ranked(Order::Inliers, 2), [(4, 20.0), (0, 14.0), (1, 13.0)]);
         // images 0 and 1 are one place: 14 + 13 inliers; of two equal sums
@@ -716,17 +739,9 @@ mod tests {
         }
         let map = b.build("m", "v", None);
         let query: Vec<QueryFeature> = (0..25).map(|w| (w, grid_keypoint(w)).into()).collect();
-        let fit = AllInliers(VerifyParams::default().fit());
         let votes = [(5, 0.9), (0, 0.8), (2, 0.7), (1, 0.6)];
-        let ranked = |order: Order, window: u32| -> Vec<(u32, f32)> {
-            let params = VerifyParams {
-                order,
-                ..Default::default()
-            };
-            rerank(&map, &votes, &query, &fit, &params, window)
-                .iter()
-                .map(|r| (r.id, r.score()))
-                .collect()
+        let ranked = |order: Order, window: u32| {
+            scores(&all_inliers(&map, &votes, &query, in_order(order), window))
         };
         // the place order puts image 0 first (the most inliers of its own
         // among equal sums); place-scale answers with image 1, at the place's
@@ -740,11 +755,7 @@ mod tests {
             [(1, 50.0), (0, 50.0), (2, 50.0), (5, 0.0)]
         );
         // and it answers with the distinctness of the leader it displaced
-        let params = VerifyParams {
-            order: Order::PlaceScale,
-            ..Default::default()
-        };
-        let out = rerank(&map, &votes, &query, &fit, &params, 2);
+        let out = all_inliers(&map, &votes, &query, in_order(Order::PlaceScale), 2);
         let from: Vec<(u32, u32)> = out.iter().map(|r| (r.id, r.distinct_from)).collect();
         assert_eq!(from, [(1, 0), (0, 0), (2, 2), (5, 5)]);
         // an unverified candidate is not a choice: with 14 inliers needed
@@ -752,14 +763,11 @@ mod tests {
         // of image 2 (1.5)
         let with_min = |min_inliers: usize| -> Vec<u32> {
             let params = VerifyParams {
-                order: Order::PlaceScale,
                 min_inliers,
-                ..Default::default()
+                ..in_order(Order::PlaceScale)
             };
-            rerank(&map, &votes, &query, &fit, &params, 2)
-                .iter()
-                .map(|r| r.id)
-                .collect()
+            let out = all_inliers(&map, &votes, &query, params, 2);
+            out.iter().map(|r| r.id).collect()
         };
         assert_eq!(with_min(14), [1, 0, 2, 5]);
         assert_eq!(with_min(15), [0, 2, 1, 5]);
