@@ -120,10 +120,15 @@ fn paper_rows(columns: &[&SettingSummary], parameter: &str) -> Vec<Vec<String>> 
         s.setting.parameter().map_or("–".into(), format_parameter)
     }));
     rows.push(row("recall@1".into(), &|s| pct_seeds(&s.recall_at_1)));
+    rows.push(row("recall@1, per seed".into(), &|s| per_seed(&s.recall_at_1, pct)));
     rows.push(row("recall@5".into(), &|s| pct_seeds(&s.recall_at_5)));
     rows.push(row("recall top-1 @90%P by distinctness".into(), &|s| {
         pct_seeds(&s.recall90_top1_distinct)
     }));
+    rows.push(row(
+        "recall top-1 @90%P by distinctness, per seed".into(),
+        &|s| per_seed(&s.recall90_top1_distinct, pct),
+    ));
     rows.push(row("its distinctness cut, per seed".into(), &|s| {
         per_seed(&s.cut90_top1_distinct, |c| format!("{c:.3}"))
     }));
@@ -296,6 +301,8 @@ fn explicit_section(report: &Report, base: &SettingSummary) -> String {
     }
     let mut columns = vec![base];
     columns.extend(report.explicit.iter().map(|&i| &report.settings[i]));
+    // and, with verification, the same settings verified
+    columns.extend(report.settings.iter().filter(|s| s.setting.verify));
     let header: Vec<String> = std::iter::once(String::new())
         .chain(columns.iter().map(|c| marked(c, c.label.clone())))
         .collect();
