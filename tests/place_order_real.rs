@@ -16,9 +16,8 @@ use bowloc::search::{RuleSpec, SearchOptions, search_words};
 
 /// Printed by this test on an Intel Xeon with AVX-512 (`cargo test --release
 /// --test place_order_real -- --nocapture`): recall@1 0.790 by votes, 0.730
-/// by own inliers, 0.785 by place inliers, 0.815 place-scale (vocabulary seed
-/// 1). Over seeds 1 /
-/// 2 / 3, `scripts/verify-orders.sh gardens-point:1000` printed 79.0 / 81.0 /
+/// by own inliers, 0.785 by place inliers, 0.815 place-scale (vocabulary
+/// seed 1). Over seeds 1 / 2 / 3, `scripts/verify-orders.sh gardens-point:1000` printed 79.0 / 81.0 /
 /// 84.0 % by votes, 73.0 / 78.0 / 77.0 by own inliers and 78.5 / 83.5 / 81.0
 /// by place inliers; at K = 5000 the place order is also the best of the
 /// three on the worst seed (docs/results.md, "Place inliers").

@@ -1,9 +1,9 @@
 //! Bytes → 8-bit grayscale image, with the format and pixel count checked
 //! from the file header before any pixel is decoded, and a JPEG's end checked
 //! (OpenCV would decode a truncated JPEG, grey below the cut, without a
-//! word). A JPEG much larger than the frame SIFT will see is decoded at a
-//! fraction of its size (libjpeg's scaled decoding), which skips most of the
-//! decoding work of a phone photo.
+//! word). A JPEG at least twice the frame SIFT will see is decoded at a
+//! fraction of its size (libjpeg's scaled decoding), which saves part of its
+//! decoding and most of the downscaling (docs/performance.md, "Large photos").
 
 use super::FeatureError;
 use opencv::core::{Mat, Vector};
