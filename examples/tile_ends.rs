@@ -6,7 +6,10 @@
 //! alone) lead in the same place as all the votes so far, the share of the
 //! whole image's decode and extraction time spent up to then, and the
 //! leader's inliers and its place's (verified as the service verifies,
-//! against the features voted so far). A rule that
+//! against the features voted so far), and the answer the service would give
+//! then with verification on (the top k re-ranked in the configured order:
+//! its top-1 and top-5 right or not, the first answer's inliers and the
+//! |ln| of its relative scale, −1 when it has none). A rule that
 //! stops at tile ends can be tried on these rows without a new search.
 //!
 //! ```sh
@@ -19,7 +22,8 @@ use bowloc::eval::cache;
 use bowloc::eval::sweep::seed;
 use bowloc::features::TileGrid;
 use bowloc::features::fit::OpenCvFit;
-use bowloc::geometry::verify::{VerifyParams, verify_leader, with_keypoints};
+use bowloc::geometry::relative_scale::relative_scale;
+use bowloc::geometry::verify::{VerifyParams, rerank, verify_leader, with_keypoints};
 use bowloc::pipeline::code;
 use bowloc::search::rank::top_n;
 use bowloc::search::stop::RuleContext;
@@ -58,7 +62,7 @@ fn main() -> anyhow::Result<()> {
     let fit = OpenCvFit::new(verify.fit());
     let images = map.images() as u32;
     println!(
-        "seed,run,query,tile,tiles,time_share,top1,top5,z,tile_agrees,tile_leader_z,leader,tile_leader,features,total,leader_inliers,place_inliers"
+        "seed,run,query,tile,tiles,time_share,top1,top5,z,tile_agrees,tile_leader_z,leader,tile_leader,features,total,leader_inliers,place_inliers,vtop1,vtop5,v_inliers,v_log_scale"
     );
     for q in 0..queries.len() {
         let truth = &dataset.truth[q];
@@ -100,6 +104,17 @@ fn main() -> anyhow::Result<()> {
                 spent += query.tiles.get(t).map_or(0.0, |t| t.ms as f64);
                 let top = top_n(&voter, 5, 0.0, None, window);
                 let top1 = top.first().is_some_and(|r| truth.contains(&r.id));
+                // the answer the service gives after verifying the top k
+                let candidates = top_n(&voter, verify.top_k, 0.0, None, window);
+                let votes: Vec<(u32, f32)> = candidates.iter().map(|r| (r.id, r.score)).collect();
+                let reranked = rerank(&map, &votes, &seen, &fit, &verify, window);
+                let vtop1 = reranked.first().is_some_and(|r| truth.contains(&r.id));
+                let vtop5 = reranked.iter().take(5).any(|r| truth.contains(&r.id));
+                let (v_inliers, v_log_scale) = reranked.first().map_or((0, -1.0), |r| {
+                    let inliers = r.verification.map_or(0, |v| v.inliers);
+                    let scale = relative_scale(&r.inlier_pairs).map_or(-1.0, |s| s.ln().abs());
+                    (inliers, scale)
+                });
                 let top5 = top.iter().any(|r| truth.contains(&r.id));
                 let z = z_rule.statistic(&voter).map_or(0.0, |s| s.0);
                 let alone_z = z_rule.statistic(&alone).map_or(0.0, |s| s.0);
@@ -108,7 +123,7 @@ fn main() -> anyhow::Result<()> {
                     _ => false,
                 };
                 println!(
-                    "{},{run},{q},{},{},{:.4},{},{},{z:.4},{},{alone_z:.4},{},{},{},{},{leader_inliers},{place_inliers}",
+                    "{},{run},{q},{},{},{:.4},{},{},{z:.4},{},{alone_z:.4},{},{},{},{},{leader_inliers},{place_inliers},{},{},{v_inliers},{v_log_scale:.4}",
                     vocab.meta().seed,
                     k + 1,
                     order.len(),
@@ -120,6 +135,8 @@ fn main() -> anyhow::Result<()> {
                     alone.tally().leader.map_or(-1, i64::from),
                     voter.tally().features,
                     coded.words.len(),
+                    u8::from(vtop1),
+                    u8::from(vtop5),
                 );
             }
         }

@@ -18,7 +18,11 @@
 #     place (the map images within 2 of it) has m inliers against the
 #     features voted so far;
 #   - how often the answer after two tiles is worse than the full search's,
-#     and how well z and other statistics rank those cases (AUC).
+#     and how well z and other statistics rank those cases (AUC);
+#   - the same with verification on (the service's default): each tile
+#     end's answer re-ranked by inliers against the features so far, the loss
+#     taken against the verified full search, and a stop that also fires when
+#     the answer has m inliers showing the scene at the query's scale.
 #
 #   scripts/tile-ends.sh [OUT]     (default OUT: data/eval/tile-ends)
 set -euo pipefail
@@ -42,14 +46,14 @@ def load(name):
             rows[(r["seed"], r["run"], r["query"])].append({k: float(v) for k, v in r.items()})
     return rows
 
-def evaluate(rows, stop):
+def evaluate(rows, stop, top1="top1", top5="top5"):
     per_seed = collections.defaultdict(lambda: [0, 0, 0, 0, 0])
     times = []
     for key, ends in rows.items():
         k = next((i for i in range(len(ends) - 1) if stop(ends, i)), len(ends) - 1)
         e, f = ends[k], ends[-1]
         d = per_seed[key[0]]
-        d[0] += f["top1"]; d[1] += e["top1"]; d[2] += f["top5"]; d[3] += e["top5"]; d[4] += 1
+        d[0] += f[top1]; d[1] += e[top1]; d[2] += f[top5]; d[3] += e[top5]; d[4] += 1
         times.append(e["time_share"])
     loss = max(max(d[0] - d[1], d[2] - d[3]) * 100 / d[4] for d in per_seed.values())
     return loss, statistics.median(times), statistics.mean(times)
@@ -59,7 +63,7 @@ def show(label, a, b):
           f"rtabmap-loop: loss {b[0]:4.1f}, time {b[1]:.3f} / {b[2]:.3f}")
 
 gp, rt = load("gardens-point"), load("rtabmap-loop")
-both = lambda stop: (evaluate(gp, stop), evaluate(rt, stop))
+both = lambda stop, *keys: (evaluate(gp, stop, *keys), evaluate(rt, stop, *keys))
 print("stops at tile ends only; loss: worst seed, points of recall@1 or recall@5; "
       "time: median / mean share of the whole image's decode + extraction")
 show("full search (all four tiles)", *both(lambda e, i: False))
@@ -94,13 +98,38 @@ statistics_at_two = {
     "the leader's inliers": lambda e, p: e["leader_inliers"],
     "its place's inliers": lambda e, p: e["place_inliers"],
 }
-worse = [ends for ends in gp.values()
-         if ends[-1]["top1"] > ends[1]["top1"] or ends[-1]["top5"] > ends[1]["top5"]]
-print(f"gardens-point after two tiles: {len(worse)} of {len(gp)} searches answer worse than the full search; "
-      "AUC of each statistic against them:")
-for name, f in statistics_at_two.items():
-    good = [f(ends[1], ends[0]) for ends in gp.values()
-            if not (ends[-1]["top1"] > ends[1]["top1"] or ends[-1]["top5"] > ends[1]["top5"])]
-    bad = [f(ends[1], ends[0]) for ends in worse]
-    print(f"  {name}: {auc(good, bad):.3f}")
+def separation(statistics, top1="top1", top5="top5", label="the full search"):
+    is_worse = lambda ends: ends[-1][top1] > ends[1][top1] or ends[-1][top5] > ends[1][top5]
+    worse = [ends for ends in gp.values() if is_worse(ends)]
+    print(f"gardens-point after two tiles: {len(worse)} of {len(gp)} searches answer worse than {label}; "
+          "AUC of each statistic against them:")
+    for name, f in statistics.items():
+        good = [f(ends[1], ends[0]) for ends in gp.values() if not is_worse(ends)]
+        bad = [f(ends[1], ends[0]) for ends in worse]
+        print(f"  {name}: {auc(good, bad):.3f}")
+separation(statistics_at_two)
+
+# The same with verification on (the service's default): each tile end's
+# answer is the top k re-ranked in the configured order, and the loss is
+# against the verified full search.
+verified = ("vtop1", "vtop5")
+print("with verification: the answer at a tile end and the full search's both re-ranked by inliers")
+show("full search, verified", *both(lambda e, i: False, *verified))
+for z in (1, 1.5, 2, 2.5):
+    show(f"place-z {z}, verified", *both(lambda e, i, z=z: e[i]["z"] > z, *verified))
+at_scale = lambda e, m, s: e["v_inliers"] >= m and 0 <= e["v_log_scale"] <= s
+for m, s in ((12, 0.1), (12, 0.2), (12, 0.4), (24, 0.2)):
+    show(f"z > 2, or {m} inliers at |ln scale| <= {s}",
+         *both(lambda e, i, m=m, s=s: e[i]["z"] > 2 or at_scale(e[i], m, s), *verified))
+schedules = ((evaluate(gp, lambda e, i, t=t: e[i]["z"] > t[i], *verified), t)
+             for t in itertools.product(grid, repeat=3))
+best = min((median, t) for (loss, median, _), t in schedules if loss <= 1.0)[1]
+show(f"best z per tile end {best}", *both(lambda e, i: e[i]["z"] > best[i], *verified))
+show("oracle, verified", *both(lambda e, i: e[i]["vtop1"] >= e[-1]["vtop1"] and e[i]["vtop5"] >= e[-1]["vtop5"], *verified))
+separation({
+    "z": lambda e, p: e["z"],
+    "the answer's inliers": lambda e, p: e["v_inliers"],
+    "its inliers when its scale is within 0.2 of the query's": lambda e, p: e["v_inliers"] * at_scale(e, 0, 0.2),
+    "its place's inliers": lambda e, p: e["place_inliers"],
+}, *verified, label="the verified full search")
 PY

@@ -660,6 +660,7 @@ impl Localizer {
                 fit: &self.fit,
                 params: &self.verify,
                 keypoints: &keypoints,
+                place_window: options.place_window,
             };
             search.feed_tile(
                 tile.len(),

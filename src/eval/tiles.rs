@@ -168,6 +168,7 @@ impl Query {
                 fit: &*g.fit,
                 params: &g.params,
                 keypoints: &fed_keypoints,
+                place_window: options.place_window,
             },
             spent: Duration::ZERO,
         });
@@ -234,6 +235,17 @@ impl<C: search::LeaderCheck> search::LeaderCheck for CpuTimed<C> {
         let inliers = self.inner.inliers(image, voted);
         self.spent += started.elapsed();
         inliers
+    }
+
+    fn answer(
+        &mut self,
+        candidates: &[(u32, f32)],
+        voted: &[search::Voted],
+    ) -> Option<search::stop::CheckedAnswer> {
+        let started = ThreadTime::now();
+        let answer = self.inner.answer(candidates, voted);
+        self.spent += started.elapsed();
+        answer
     }
 }
 

@@ -11,6 +11,7 @@ use super::matches::{Correspondences, QueryFeature, QueryFeatures, tentative};
 use super::packed::PackedFeature;
 use super::relative_scale::relative_scale;
 use crate::index::MapRead;
+use crate::search::stop::CheckedAnswer;
 use crate::search::{LeaderCheck, Voted};
 use serde::{Deserialize, Serialize};
 
@@ -403,7 +404,6 @@ pub fn verify_leader(
     .0
 }
 
-/// One candidate after re-ranking.
 /// The `verified` stop's check (a [`LeaderCheck`]): a map image against
 /// the query features voted so far, verified as the final answer is.
 /// `keypoints` holds every feature given to the search, by feature number.
@@ -412,12 +412,31 @@ pub struct LeaderVerifier<'a> {
     pub fit: &'a dyn ModelFit,
     pub params: &'a VerifyParams,
     pub keypoints: &'a [Keypoint],
+    /// The search's place window ([`rerank`]).
+    pub place_window: u32,
 }
 
 impl LeaderCheck for LeaderVerifier<'_> {
     fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize {
         let query = with_keypoints(voted, self.keypoints);
         verify_leader(self.map, image, &query, self.fit, self.params).inliers
+    }
+
+    fn answer(&mut self, candidates: &[(u32, f32)], voted: &[Voted]) -> Option<CheckedAnswer> {
+        let query = with_keypoints(voted, self.keypoints);
+        let reranked = rerank(
+            self.map,
+            candidates,
+            &query,
+            self.fit,
+            self.params,
+            self.place_window,
+        );
+        reranked.first().map(|r| CheckedAnswer {
+            id: r.id,
+            inliers: r.inliers(),
+            scale: relative_scale(&r.inlier_pairs),
+        })
     }
 }
 

@@ -58,12 +58,28 @@ pub trait StopRule: Send {
     }
 }
 
-/// A geometric check of a map image against the query features voted so
-/// far: how many of them are inliers
-/// of a model relating the two images. Implemented outside the core (the
-/// model fit is OpenCV's).
+/// A geometric check against the query features voted so far. Implemented
+/// outside the core (the model fit is OpenCV's).
 pub trait LeaderCheck {
+    /// How many of them are inliers of a model relating map image `image`
+    /// to the query.
     fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize;
+
+    /// The answer verification would give now: `candidates` (id, votes;
+    /// best first) verified and re-ranked as the final answer is, and its
+    /// first. `None` without candidates.
+    fn answer(&mut self, candidates: &[(u32, f32)], voted: &[Voted]) -> Option<CheckedAnswer>;
+}
+
+/// The first answer of a [`LeaderCheck::answer`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CheckedAnswer {
+    pub id: u32,
+    /// Its inliers (0 when it was not verified).
+    pub inliers: usize,
+    /// The scale its inliers show the scene at in the map image against the
+    /// query (1: the same; `None` with too few inliers to tell).
+    pub scale: Option<f32>,
 }
 
 /// What a rule may know about the search it runs in.
@@ -269,8 +285,8 @@ pub struct RuleSpec {
     /// The rule's parameter (ignored by rules that take none).
     #[serde(default)]
     pub parameter: f64,
-    /// Also stop when the leader is verified with this many inliers
-    /// ([`RuleSpec::or_verified`]).
+    /// Also stop when the answer is verified with this many inliers at the
+    /// query's scale ([`RuleSpec::or_verified`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub or_verified: Option<u32>,
 }
@@ -300,10 +316,10 @@ impl RuleSpec {
         })
     }
 
-    /// The rule, which also stops once the search's leader is verified with
-    /// at least `inliers` inliers against the features voted so far (the
-    /// `verified` rule's check and schedule); with `None`, the rule as it
-    /// is. Refused for a rule that cannot stop early (`none`: use `verified`
+    /// The rule, which also stops at a tile's end (tiles left) once the
+    /// answer verification would give then has at least `inliers` inliers
+    /// against the features voted so far and shows the scene at the query's
+    /// scale (`or_verified.rs`); with `None`, the rule as it is. Refused for a rule that cannot stop early (`none`: use `verified`
     /// itself) and for a geometric one.
     pub fn or_verified(self, inliers: Option<f64>) -> Result<Self, String> {
         let Some(inliers) = inliers else {
@@ -351,8 +367,8 @@ impl RuleSpec {
             None => rule,
             Some(m) => Box::new(or_verified::OrVerified {
                 votes: rule,
-                verified: (verified::INFO.make)(m as f64, context)
-                    .expect("validated on construction"),
+                min_inliers: m as usize,
+                answer: None,
             }),
         }
     }
@@ -370,7 +386,7 @@ impl std::fmt::Display for RuleSpec {
             None => write!(f, "{}", self.name)?,
         }
         match self.or_verified {
-            Some(m) => write!(f, " or verified (inliers {m})"),
+            Some(m) => write!(f, " or verified at scale (inliers {m})"),
             None => Ok(()),
         }
     }

@@ -1,17 +1,51 @@
 //! A vote rule that a geometric check may overtake: the search stops when
-//! the vote rule fires or when its leader is verified with at least m
-//! inliers against the features voted so far, whichever comes first
-//! ([`RuleSpec::or_verified`](super::RuleSpec::or_verified)). The vote rule
-//! stops the queries whose votes are clear; the check stops those whose
-//! votes are not clear yet but whose leader already has the geometry of a
-//! match. It is checked on the `verified` rule's schedule.
+//! the vote rule fires or when the answer verification would give now has at
+//! least m inliers and shows the scene at the query's scale, whichever comes
+//! first ([`RuleSpec::or_verified`](super::RuleSpec::or_verified)). The vote
+//! rule stops the queries whose votes are clear; the check stops those whose
+//! votes are not clear yet but whose answer already has the geometry of a
+//! match taken from where the query was.
+//!
+//! The scale matters: a map image taken a few steps before or after the query
+//! shares its geometry too (the scene smaller or larger in it), and such near
+//! misses are most of a route's wrong answers. An answer whose inliers show
+//! the scene at the query's scale, within [`MAX_LOG_SCALE`], is one taken
+//! where the query was.
+//!
+//! Stopping saves time only where it saves extraction, so the check runs at
+//! the end of each tile of a streamed query but the last (a check verifies
+//! up to [`CANDIDATES`] candidates, each a model fit: about half a
+//! millisecond); a search with no tile left, or extracted whole, has the vote
+//! rule alone.
 
-use super::{LeaderCheck, Needs, StopRule, VoteStats};
+use super::{CheckedAnswer, LeaderCheck, Needs, StopRule, VoteStats};
 use crate::search::Voted;
+
+/// The leading images a check verifies: the service's default
+/// `verify.top_k`.
+pub const CANDIDATES: usize = 10;
+
+/// Largest |ln scale| of an answer taken where the query was: its inliers
+/// spread at most e^0.2 ≈ 1.22 times more (or less) in the map image than
+/// in the query. Chosen on gardens-point with `scripts/tile-ends.sh`
+/// (docs/results.md, "A verified stop beside the rule").
+pub const MAX_LOG_SCALE: f32 = 0.2;
 
 pub struct OrVerified {
     pub votes: Box<dyn StopRule>,
-    pub verified: Box<dyn StopRule>,
+    pub min_inliers: usize,
+    /// The last check's answer.
+    pub answer: Option<CheckedAnswer>,
+}
+
+impl OrVerified {
+    /// Whether `answer` stops the search.
+    fn verified_at_scale(&self, answer: &CheckedAnswer) -> bool {
+        answer.inliers >= self.min_inliers
+            && answer
+                .scale
+                .is_some_and(|s| s > 0.0 && s.ln().abs() <= MAX_LOG_SCALE)
+    }
 }
 
 impl StopRule for OrVerified {
@@ -20,7 +54,10 @@ impl StopRule for OrVerified {
     }
 
     fn needs(&self) -> Needs {
-        self.votes.needs().and(self.verified.needs())
+        self.votes.needs().and(Needs {
+            top: CANDIDATES,
+            ..Needs::default()
+        })
     }
 
     /// The vote rule's.
@@ -35,9 +72,29 @@ impl StopRule for OrVerified {
         leader_check: Option<&mut dyn LeaderCheck>,
         batch_end: bool,
     ) -> Option<String> {
-        self.votes.check(voter).or_else(|| {
-            self.verified
-                .check_with(voter, voted, leader_check, batch_end)
+        if let Some(why) = self.votes.check(voter) {
+            return Some(why);
+        }
+        // a tile's end with tiles left: N is not known yet
+        if !batch_end || voter.tally().total.is_some() {
+            return None;
+        }
+        let candidates: Vec<(u32, f32)> = voter
+            .top()
+            .iter()
+            .take(CANDIDATES)
+            .map(|&(h, id)| (id, h))
+            .collect();
+        let answer = leader_check?.answer(&candidates, voted)?;
+        self.answer = Some(answer);
+        self.verified_at_scale(&answer).then(|| {
+            format!(
+                "answer {} verified at the query's scale: {} inliers ≥ {}, scale {:.2}",
+                answer.id,
+                answer.inliers,
+                self.min_inliers,
+                answer.scale.unwrap_or(0.0)
+            )
         })
     }
 }

@@ -321,10 +321,11 @@ const VOTED_0: Voted = Voted {
 };
 
 /// A geometric check that finds `inliers` for image 0 and none elsewhere,
-/// counting its calls.
+/// counting its calls; image 0's inliers show the scene at `scale`.
 struct FakeCheck {
     inliers: usize,
     calls: usize,
+    scale: f32,
 }
 
 impl LeaderCheck for FakeCheck {
@@ -332,6 +333,17 @@ impl LeaderCheck for FakeCheck {
         self.calls += 1;
         assert!(!voted.is_empty());
         if image == 0 { self.inliers } else { 0 }
+    }
+
+    /// Image 0 first when it is a candidate, else the first candidate.
+    fn answer(&mut self, candidates: &[(u32, f32)], voted: &[Voted]) -> Option<CheckedAnswer> {
+        let first = candidates.iter().find(|c| c.0 == 0).or(candidates.first())?;
+        let inliers = self.inliers(first.0, voted);
+        Some(CheckedAnswer {
+            id: first.0,
+            inliers,
+            scale: (inliers > 0).then_some(self.scale),
+        })
     }
 }
 
@@ -345,6 +357,7 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     let mut c = FakeCheck {
         inliers: 12,
         calls: 0,
+        scale: 1.0,
     };
     // the first check offered verifies the leader
     assert_eq!(verified_stop(12.0, &s, &mut c), Some(1));
@@ -353,6 +366,7 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     let mut c = FakeCheck {
         inliers: 12,
         calls: 0,
+        scale: 1.0,
     };
     assert_eq!(verified_stop(13.0, &s, &mut c), None);
     assert_eq!(c.calls, 200);
@@ -361,6 +375,7 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     let mut c = FakeCheck {
         inliers: 50,
         calls: 0,
+        scale: 1.0,
     };
     assert_eq!(verified_stop(8.0, &s, &mut c), None);
     // the same leader on the same votes is not checked twice
@@ -371,6 +386,7 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     let mut c = FakeCheck {
         inliers: 12,
         calls: 0,
+        scale: 1.0,
     };
     voter.vote(0, 0);
     for _ in 0..3 {
@@ -398,6 +414,7 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     let mut c = FakeCheck {
         inliers: 12,
         calls: 0,
+        scale: 1.0,
     };
     let mut voted = Vec::new();
     let mut checked_at = Vec::new();
@@ -460,21 +477,35 @@ fn a_vote_rule_or_verified_stops_at_whichever_comes_first() {
     assert!(votes.shardable() && !votes.geometric());
     assert_eq!(
         either.to_string(),
-        "stable-peak (threshold 50) or verified (inliers 12)"
+        "stable-peak (threshold 50) or verified at scale (inliers 12)"
     );
-    // the leader verifies at the first check: the check stops the search
+    // the answer verifies at the query's scale at the first check: the
+    // check stops the search
     let mut c = FakeCheck {
         inliers: 12,
         calls: 0,
+        scale: 1.0,
     };
     assert_eq!(stops_with_check(&either, &s, Some(&mut c)), Some(1));
     // it never verifies: the vote rule stops it where it would alone
     let mut c = FakeCheck {
         inliers: 11,
         calls: 0,
+        scale: 1.0,
     };
     assert_eq!(stops_with_check(&either, &s, Some(&mut c)), alone);
     assert!(c.calls > 0);
+    // enough inliers, but the scene 1.5 times larger in the map image than
+    // in the query (a map image taken ahead of it): the vote rule alone;
+    // at 1.2 times, within e^0.2, the check stops it
+    for (scale, stop) in [(1.5, alone), (1.0 / 1.5, alone), (1.2, Some(1))] {
+        let mut c = FakeCheck {
+            inliers: 40,
+            calls: 0,
+            scale,
+        };
+        assert_eq!(stops_with_check(&either, &s, Some(&mut c)), stop, "{scale}");
+    }
     // without a check, the vote rule alone
     assert_eq!(stops_with_check(&either, &s, None), alone);
     // it travels with the rule and is absent when not set
@@ -615,4 +646,39 @@ fn place_z_asks_more_lead_per_feature_of_a_long_query() {
     let z = |s: &[u32]| statistic_after("place-z", 8, s);
     assert!((z(&short) - 2f64.sqrt()).abs() < 1e-4, "{}", z(&short));
     assert!((z(&long) - 2.0 / 10f64.sqrt()).abs() < 1e-4, "{}", z(&long));
+}
+
+#[test]
+fn or_verified_checks_only_at_a_tiles_end_with_tiles_left() {
+    let rule = spec("stable-peak", 1000.0).or_verified(Some(12.0)).unwrap();
+    let map = one_word_per_image();
+    let view = map.view();
+    let mut rule_now = rule.build(&RuleContext::default());
+    let mut voter = Voter::with_needs(&view, rule_now.needs());
+    let mut c = FakeCheck {
+        inliers: 40,
+        calls: 0,
+        scale: 1.0,
+    };
+    voter.vote(0, 0);
+    let voted = [Voted {
+        feature: 0,
+        word: 0,
+        signature: 0,
+    }];
+    // inside a tile: no check
+    assert!(rule_now.check_with(&voter, &voted, Some(&mut c), false).is_none());
+    assert_eq!(c.calls, 0);
+    // the last tile's end (N known): the search ends anyway, no check
+    voter.set_total(1);
+    assert!(rule_now.check_with(&voter, &voted, Some(&mut c), true).is_none());
+    assert_eq!(c.calls, 0);
+    // a tile's end with tiles left: checked, and it stops
+    let mut rule_now = rule.build(&RuleContext::default());
+    let mut voter = Voter::with_needs(&view, rule_now.needs());
+    voter.vote(0, 0);
+    voter.set_expected_total(4.0);
+    let why = rule_now.check_with(&voter, &voted, Some(&mut c), true);
+    assert_eq!(c.calls, 1);
+    assert!(why.is_some_and(|w| w.contains("answer 0 verified at the query's scale")));
 }
