@@ -594,6 +594,11 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         let mut indices = vec![0];
         indices.extend(explicit.iter().copied().filter(|&i| i != 0));
         for i in indices {
+            // a geometric rule's setting verifies already
+            if settings[i].verify {
+                verified_pairs.push((i, i));
+                continue;
+            }
             let mut s = settings[i].clone();
             s.verify = true;
             settings.push(s);

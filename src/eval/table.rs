@@ -297,14 +297,31 @@ pub fn markdown(report: &Report) -> String {
 }
 
 /// The settings asked for with `--set`, next to the full search.
+/// The settings asked for, then, with verification, every setting that
+/// verifies (those asked for re-ranked, and geometric rules).
+fn asked_and_verified(report: &Report) -> impl Iterator<Item = &SettingSummary> {
+    let asked = report.explicit.iter().map(|&i| &report.settings[i]);
+    asked.chain(report.settings.iter().filter(|s| s.setting.verify))
+}
+
+/// Append the settings of `more` not in `list` yet.
+fn add_once<'a>(
+    list: &mut Vec<&'a SettingSummary>,
+    more: impl IntoIterator<Item = &'a SettingSummary>,
+) {
+    for x in more {
+        if !list.iter().any(|p| std::ptr::eq(*p, x)) {
+            list.push(x);
+        }
+    }
+}
+
 fn explicit_section(report: &Report, base: &SettingSummary) -> String {
     if report.explicit.is_empty() {
         return String::new();
     }
     let mut columns = vec![base];
-    columns.extend(report.explicit.iter().map(|&i| &report.settings[i]));
-    // and, with verification, the same settings verified
-    columns.extend(report.settings.iter().filter(|s| s.setting.verify));
+    add_once(&mut columns, asked_and_verified(report));
     let header: Vec<String> = std::iter::once(String::new())
         .chain(columns.iter().map(|c| marked(c, c.label.clone())))
         .collect();
@@ -383,7 +400,7 @@ fn warmup_section(report: &Report) -> String {
 }
 
 /// Time per stage for the full search (also on whole, untiled queries), the
-/// recommended setting, the settings asked for and, per rule, the setting
+/// recommended setting, the settings asked for (and verified), and, per rule, the setting
 /// nearest half the features, with the share of tiles extracted and the
 /// request time against the tiled full search's on the same query.
 fn timing_section(report: &Report, base: &SettingSummary) -> String {
@@ -392,28 +409,20 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
     if let Some(w) = &report.whole_image {
         picked.push(w);
     }
-    for &i in &report.explicit {
-        let x = &report.settings[i];
-        if !picked.iter().any(|p| std::ptr::eq(*p, x)) {
-            picked.push(x);
-        }
-    }
+    add_once(&mut picked, asked_and_verified(report));
     if let Some(r) = &report.recommendation {
-        picked.push(&report.settings[r.index]);
+        add_once(&mut picked, [&report.settings[r.index]]);
     }
     for rule in &report.config.rules {
-        if let Some(x) = of_rule(report, rule, main)
+        let nearest_half = of_rule(report, rule, main)
             .into_iter()
             .filter(|x| x.setting.rule.name != BASELINE)
             .min_by(|a, b| {
                 (a.fraction.mean - 0.5)
                     .abs()
                     .total_cmp(&(b.fraction.mean - 0.5).abs())
-            })
-            && !picked.iter().any(|p| std::ptr::eq(*p, x))
-        {
-            picked.push(x);
-        }
+            });
+        add_once(&mut picked, nearest_half);
     }
     let header: Vec<String> = [
         "setting",

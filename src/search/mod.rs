@@ -108,6 +108,10 @@ impl SearchOptions {
     /// own evidence and would stop without one; the warm-up keeps enough
     /// features for a geometric verification of the answer (12 inliers).
     pub const RECOMMENDED_WARMUP: usize = 20;
+    /// Its verified stop ([`RuleSpec::or_verified`]): also stop at a tile's
+    /// end once the answer has this many inliers at the query's scale
+    /// (docs/results.md, "A verified stop beside the rule").
+    pub const RECOMMENDED_OR_VERIFIED: f64 = 12.0;
     /// The place window distinctness is measured with (docs/results.md,
     /// "Distinctness").
     pub const PLACE_WINDOW: u32 = 2;
@@ -148,6 +152,7 @@ impl SearchOptions {
     pub fn recommended() -> Self {
         Self {
             rule: RuleSpec::new(Self::RECOMMENDED_RULE, Some(Self::RECOMMENDED_PARAMETER))
+                .and_then(|r| r.or_verified(Some(Self::RECOMMENDED_OR_VERIFIED)))
                 .expect("a valid built-in rule"),
             min_features: Self::RECOMMENDED_WARMUP,
             ..Self::default()

@@ -213,10 +213,12 @@ pub struct FilesConfig {
 pub struct SearchDefaults {
     pub rule: String,
     /// Parameter of `rule`, when it takes one (`bowloc rules` names each).
+    /// Absent: the built-in rule's own when `rule` is the built-in one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub threshold: Option<f64>,
-    /// Also stop when the leader is verified with this many inliers (a vote
-    /// rule only; absent: no such check).
+    /// Also stop when the answer is verified with this many inliers at the
+    /// query's scale (a vote rule only). 0: no such check. Absent: the
+    /// built-in rule's own when `rule` is the built-in one, else none.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub or_verified: Option<u32>,
     pub top_n: usize,
@@ -311,8 +313,10 @@ impl Default for SearchDefaults {
         // The same defaults as every front end's.
         let o = SearchOptions::recommended();
         Self {
-            threshold: o.rule.parameter_name().map(|_| o.rule.parameter),
-            or_verified: o.rule.or_verified,
+            // the built-in rule's, by default_rule(): a file naming another
+            // rule need not unset them
+            threshold: None,
+            or_verified: None,
             rule: o.rule.name,
             top_n: o.top_n,
             min_features: o.min_features,
@@ -639,14 +643,24 @@ impl Config {
         self.search.tiles.parse()
     }
 
-    /// The default rule with its parameter.
+    /// The default rule with its parameter and verified stop: those given,
+    /// else the built-in rule's own when `search.rule` names it.
     pub fn default_rule(&self) -> Result<RuleSpec, String> {
         let s = &self.search;
-        let rule = RuleSpec::new(&s.rule, s.threshold)?;
+        let builtin = SearchOptions::recommended().rule;
+        let is_builtin = s.rule == builtin.name;
+        let threshold = s.threshold.or(is_builtin.then_some(builtin.parameter));
+        let rule = RuleSpec::new(&s.rule, threshold)?;
         if rule.parameter_name().is_none() && s.threshold.is_some() {
             return Err(format!("rule `{}` takes no parameter", rule.name));
         }
-        rule.or_verified(s.or_verified.map(f64::from))
+        let or_verified = match s.or_verified {
+            Some(0) => None,
+            Some(m) => Some(m),
+            None => builtin.or_verified.filter(|_| is_builtin),
+        };
+        rule.or_verified(or_verified.map(f64::from))
+            .map_err(|e| format!("{e} (or_verified = 0 turns the check off)"))
     }
 
     /// Worker threads: the configured count, or one per core.
@@ -804,10 +818,7 @@ mod tests {
             ("[limits]\nheaders = 0\n", "limits.headers"),
             ("[limits]\nheader_bytes = 100\n", "limits.header_bytes"),
             ("[search]\nrule = \"fastest\"\n", "fastest"),
-            (
-                "[search]\nrule = \"fixed\"\n",
-                "fraction must be a number in (0, 1]",
-            ),
+            ("[search]\nrule = \"fixed\"\n", "needs a fraction"),
             (
                 "[search]\nrule = \"none\"\nthreshold = 0.5\n",
                 "takes no parameter",
@@ -871,7 +882,27 @@ mod tests {
             ("place-z", Some(16))
         );
         assert!(rule.geometric());
-        assert_eq!(Config::default().default_rule().unwrap().or_verified, None);
+        // the built-in rule's own, off with 0, none for another rule
+        assert_eq!(
+            Config::default().default_rule().unwrap(),
+            SearchOptions::recommended().rule
+        );
+        assert_eq!(
+            Config::default().default_rule().unwrap().or_verified,
+            Some(12)
+        );
+        let off = load_str("[search]\nor_verified = 0\n", &[]).unwrap();
+        assert_eq!(off.default_rule().unwrap().or_verified, None);
+        for (other, given) in [
+            ("none", ""),
+            ("verified", "threshold = 12\n"),
+            ("hoeffding", "threshold = 0.05\n"),
+            ("relative", "threshold = 2.5\n"),
+        ] {
+            let c = load_str(&format!("[search]\nrule = \"{other}\"\n{given}"), &[]).unwrap();
+            let rule = c.default_rule().unwrap();
+            assert_eq!((rule.name.as_str(), rule.or_verified), (other, None));
+        }
         for bad in [
             "[search]\nrule = \"none\"\nor_verified = 16\n",
             "[search]\nor_verified = 2\n",

@@ -337,7 +337,10 @@ impl LeaderCheck for FakeCheck {
 
     /// Image 0 first when it is a candidate, else the first candidate.
     fn answer(&mut self, candidates: &[(u32, f32)], voted: &[Voted]) -> Option<CheckedAnswer> {
-        let first = candidates.iter().find(|c| c.0 == 0).or(candidates.first())?;
+        let first = candidates
+            .iter()
+            .find(|c| c.0 == 0)
+            .or(candidates.first())?;
         let inliers = self.inliers(first.0, voted);
         Some(CheckedAnswer {
             id: first.0,
@@ -667,11 +670,19 @@ fn or_verified_checks_only_at_a_tiles_end_with_tiles_left() {
         signature: 0,
     }];
     // inside a tile: no check
-    assert!(rule_now.check_with(&voter, &voted, Some(&mut c), false).is_none());
+    assert!(
+        rule_now
+            .check_with(&voter, &voted, Some(&mut c), false)
+            .is_none()
+    );
     assert_eq!(c.calls, 0);
     // the last tile's end (N known): the search ends anyway, no check
     voter.set_total(1);
-    assert!(rule_now.check_with(&voter, &voted, Some(&mut c), true).is_none());
+    assert!(
+        rule_now
+            .check_with(&voter, &voted, Some(&mut c), true)
+            .is_none()
+    );
     assert_eq!(c.calls, 0);
     // a tile's end with tiles left: checked, and it stops
     let mut rule_now = rule.build(&RuleContext::default());
