@@ -352,8 +352,8 @@ pub struct RuleReport {
     /// The parameter's value, absent for `none`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub value: Option<f64>,
-    /// Inliers that also stop the search once its leader has them
-    /// (`or_verified`); absent without.
+    /// Inliers that also stop the search at a tile's end once its answer
+    /// has them at the query's scale (`or_verified`); absent without.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub or_verified: Option<u32>,
 }

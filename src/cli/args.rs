@@ -119,8 +119,9 @@ pub struct SearchArgs {
     /// ε of rule posterior: the probability left to places other than the leader's.
     #[arg(long)]
     pub epsilon: Option<f64>,
-    /// Also stop when the leader is geometrically verified with this many
-    /// inliers against the features voted so far (a vote rule only).
+    /// Also stop at a tile's end when the answer is geometrically verified
+    /// with this many inliers at the query's scale (a vote rule only; the
+    /// default rule has 12, 0 turns it off).
     #[arg(long)]
     pub or_verified: Option<f64>,
     /// Candidates to return.

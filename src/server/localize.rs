@@ -47,11 +47,13 @@ pub struct LocalizeParams {
     pub inliers: Option<String>,
     #[param(value_type = Option<f64>)]
     pub epsilon: Option<String>,
-    /// Also stop when the leader is geometrically verified with at least
-    /// this many inliers against the features voted so far, whichever of
+    /// Also stop at a tile's end (tiles left) when the answer verification
+    /// would give then has at least this many inliers against the features
+    /// voted so far and shows the scene at the query's scale, whichever of
     /// the rule and this check comes first (a vote rule only). Default: the
-    /// configured `search.or_verified` when the request uses the configured
-    /// rule, none when it names another.
+    /// configured `search.or_verified` (12) when the request uses the
+    /// configured rule, none when it names another rule or gives a
+    /// parameter.
     // its range, the `verified` rule's, is set from the registry in the API
     // document
     #[param(value_type = Option<u32>)]
@@ -327,6 +329,15 @@ impl LocalizeParams {
             .as_deref()
             .map(|v| number(OR_VERIFIED, v))
             .transpose()?;
+        if inliers == Some(0.0) {
+            // 0 turns a configured check off in the configuration and the
+            // CLI; here naming the rule and its parameter does
+            return Err(ApiError::invalid_parameter(
+                OR_VERIFIED,
+                "must be at least 4; a request that names the rule and its parameter \
+                 runs without the configured check",
+            ));
+        }
         rule.or_verified(inliers)
             .map_err(|e| ApiError::invalid_parameter(OR_VERIFIED, e))
     }

@@ -319,12 +319,19 @@ impl RuleSpec {
     /// The rule, which also stops at a tile's end (tiles left) once the
     /// answer verification would give then has at least `inliers` inliers
     /// against the features voted so far and shows the scene at the query's
-    /// scale (`or_verified.rs`); with `None`, the rule as it is. Refused for a rule that cannot stop early (`none`: use `verified`
+    /// scale (`or_verified.rs`); with `None`, the rule as it is; with 0,
+    /// the rule without such a check. Refused for a rule that cannot stop early (`none`: use `verified`
     /// itself) and for a geometric one.
     pub fn or_verified(self, inliers: Option<f64>) -> Result<Self, String> {
         let Some(inliers) = inliers else {
             return Ok(self);
         };
+        if inliers == 0.0 {
+            return Ok(Self {
+                or_verified: None,
+                ..self
+            });
+        }
         let info = self.info();
         if !info.stops_early || info.geometric {
             return Err(format!(

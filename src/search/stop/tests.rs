@@ -531,6 +531,9 @@ fn a_vote_rule_or_verified_stops_at_whichever_comes_first() {
     // without inliers, any rule as it is
     let none = RuleSpec::new("none", None).unwrap();
     assert_eq!(none.clone().or_verified(None).unwrap(), none);
+    // 0: the rule without the check, whatever it had
+    assert_eq!(none.clone().or_verified(Some(0.0)).unwrap(), none);
+    assert_eq!(either.clone().or_verified(Some(0.0)).unwrap(), votes);
     assert!(votes.clone().or_verified(Some(3.0)).is_err());
     assert!(votes.or_verified(Some(12.5)).is_err());
 }
