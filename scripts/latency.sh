@@ -53,7 +53,7 @@ done
 median() { sort -g | awk '{v[NR] = $1} END {print v[int((NR + 1) / 2)]}'; }
 col() { cut -f"$1" "$tmp/rows" | median; }
 share=$(awk -F'\t' '{print 100 * ($1 - $3) / $1}' "$tmp/rows" | median)
-echo "dataset=$name requests=$(wc -l <"$tmp/rows") rule=$(jq -r '.rule.name + " " + (.rule.value | tostring)' "$tmp/answer.json")"
+echo "dataset=$name requests=$(wc -l <"$tmp/rows") rule=$(jq -r '.rule.name + " " + (.rule.value | tostring) + (if .rule.or_verified then " or verified \(.rule.or_verified)" else "" end)' "$tmp/answer.json")"
 echo "median_ms request=$(col 1) decode=$(col 2) extract=$(col 3) quantize=$(col 4) vote=$(col 5) verify=$(col 8) server_total=$(col 6) fraction_used=$(col 7)"
 echo "verified (geometric verification ran): $(cut -f9 "$tmp/rows" | grep -c yes) of $(wc -l <"$tmp/rows") requests"
 echo "median share of a request that is not SIFT extraction: ${share}%"

@@ -220,8 +220,14 @@ status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/loc
 check "or_verified=12 beside place-z is reported and verifies the answer ($(jq -c .stop.detail "$B"))" jqt --arg s "$status" '
   $s == "200" and .rule.name == "place-z" and .rule.or_verified == 12
   and (.candidates[0] | has("inliers") and has("verified"))' "$B"
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?seed=3")
+check "the default rule has its verified stop of 12 inliers" jqt --arg s "$status" '
+  $s == "200" and .rule == {"name": "place-z", "parameter": "threshold", "value": 2, "or_verified": 12}' "$B"
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=place-z&threshold=2&seed=3")
+check "naming the rule and its parameter searches without the verified stop" jqt --arg s "$status" '
+  $s == "200" and .rule.name == "place-z" and (.rule | has("or_verified") | not)' "$B"
 for bad in "tiles=0x2" "tile_order=sideways" "rule=none&threshold=2" "rule=peak-mean&inliers=12" "rule=verified&inliers=3" \
-  "rule=none&or_verified=12" "rule=verified&inliers=12&or_verified=12" "or_verified=3" "or_verified=abc"; do
+  "rule=none&or_verified=12" "rule=verified&inliers=12&or_verified=12" "or_verified=3" "or_verified=0" "or_verified=abc"; do
   status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?$bad")
   check "$bad is 400 invalid_parameter ($(jq -r .error.message "$B"))" \
     test "$status/$(jq -r .error.code "$B")" = "400/invalid_parameter"
