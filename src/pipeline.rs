@@ -462,11 +462,13 @@ impl Localizer {
 
     /// The search options of a query that will be verified: enough vote
     /// candidates for the top k, none dropped by a vote score (`min_score`
-    /// then applies to inliers).
+    /// then applies to inliers), and a stop inside a tile finishing the tile
+    /// ([`SearchOptions::finish_tile`]).
     pub fn options_for_verify(&self, options: &SearchOptions) -> SearchOptions {
         SearchOptions {
             top_n: options.top_n.max(self.verify.top_k),
             min_score: 0.0,
+            finish_tile: true,
             ..options.clone()
         }
     }

@@ -88,9 +88,13 @@ const MIN_AGREEMENT: f64 = 0.88;
 #[test]
 fn the_default_threshold_means_the_same_on_both_maps() {
     let recommended = SearchOptions::recommended();
+    // place-z 2 with its verified stop, which checks at tile ends only: on
+    // the whole images searched here the vote rule alone decides
     assert_eq!(
         recommended.rule,
-        RuleSpec::new("place-z", Some(2.0)).unwrap()
+        RuleSpec::new("place-z", Some(2.0))
+            .and_then(|r| r.or_verified(Some(12.0)))
+            .unwrap()
     );
     assert_eq!(recommended.min_features, 20);
     let rules = [

@@ -186,6 +186,8 @@ impl SearchArgs {
         anyhow::ensure!(self.top_n >= 1, "--top-n must be at least 1");
         anyhow::ensure!(self.block >= 1, "--block must be at least 1");
         Ok(SearchOptions {
+            // set by the pipeline when the answer is verified
+            finish_tile: false,
             rule,
             top_n: self.top_n,
             seed: self.seed.unwrap_or_else(bowloc::report::draw_seed),

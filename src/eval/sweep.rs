@@ -121,6 +121,8 @@ impl Setting {
             tile_order: ranking.tile_order,
             seed,
             min_features: self.min_features,
+            // as the service searches a query it verifies
+            finish_tile: self.verify,
             ..SearchOptions::default()
         }
     }

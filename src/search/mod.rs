@@ -78,6 +78,12 @@ pub struct SearchOptions {
     pub place_window: u32,
     /// The order a query's tiles are extracted in.
     pub tile_order: TileOrder,
+    /// When the rule stops a streamed query inside a tile, vote the tile's
+    /// other features before ending ([`Search::feed_tile`]). Set when the
+    /// answer is verified: the tile's extraction is paid for, its other
+    /// features cost only their votes, and verification finds more inliers
+    /// with them.
+    pub finish_tile: bool,
 }
 
 impl Default for SearchOptions {
@@ -95,6 +101,7 @@ impl Default for SearchOptions {
             hamming: Some(HammingWeights::DEFAULT),
             place_window: Self::PLACE_WINDOW,
             tile_order: TileOrder::default(),
+            finish_tile: false,
         }
     }
 }
@@ -248,6 +255,12 @@ pub struct Search<'m> {
     signatures: Vec<u64>,
     timings: SearchTimings,
     stop: Option<(StopKind, String)>,
+    /// Why the rule fired inside a tile whose other features are still
+    /// being voted ([`Search::feed_tile`]).
+    finishing: Option<String>,
+    /// Whether the query comes in more than one tile and a stop inside one
+    /// finishes it ([`SearchOptions::finish_tile`]).
+    streamed: bool,
     batches: u64,
     fed: usize,
     /// Every feature voted, in voting order.
@@ -274,6 +287,8 @@ impl<'m> Search<'m> {
             signatures: vec![0; options.block.max(1)],
             timings: SearchTimings::default(),
             stop: None,
+            finishing: None,
+            streamed: false,
             batches: 0,
             fed: 0,
             voted: Vec::new(),
@@ -370,13 +385,13 @@ impl<'m> Search<'m> {
                     signature,
                 });
                 let features = self.voter.tally().features;
-                let why = if features < self.options.min_features {
+                let at_end = self.voted.len() == self.fed;
+                let why = if features < self.options.min_features || self.finishing.is_some() {
                     None
                 } else {
                     // A geometric check costs far more than a vote: offered
                     // only at a block's end, saying whether the batch ends.
                     let block_end = k + 1 == indices.len();
-                    let at_end = self.voted.len() == self.fed;
                     let check = leader_check
                         .as_mut()
                         .filter(|_| block_end)
@@ -395,8 +410,17 @@ impl<'m> Search<'m> {
                     trace.record(TracePoint::of(self.voter.tally(), statistic));
                 }
                 if let Some(why) = why {
-                    self.stop = Some((StopKind::Rule, why));
-                    break;
+                    if self.streamed && !at_end {
+                        // the tile is extracted: its other features cost
+                        // only their votes, and the answer gains them
+                        self.finishing = Some(why);
+                    } else {
+                        self.stop = Some((StopKind::Rule, why));
+                        break;
+                    }
+                }
+                if at_end && let Some(why) = self.finishing.take() {
+                    self.stop = Some((StopKind::Rule, tile_finished(why)));
                 }
             }
             self.timings.verify += checking;
@@ -412,6 +436,9 @@ impl<'m> Search<'m> {
     /// after which `share` of the image (by area, in (0, 1]) has been
     /// extracted; `last` when no tile is left, so N becomes known. N is
     /// estimated meanwhile as the features so far over the share extracted.
+    /// With [`SearchOptions::finish_tile`], when the rule stops the search
+    /// inside a tile of an image that comes in several, the tile's other
+    /// features are voted before it ends.
     /// Returns whether the search has stopped.
     pub fn feed_tile(
         &mut self,
@@ -422,6 +449,7 @@ impl<'m> Search<'m> {
         leader_check: Option<&mut dyn LeaderCheck>,
     ) -> bool {
         let fed = self.fed + count;
+        self.streamed |= !last && self.options.finish_tile;
         if last {
             self.set_total(fed);
         } else {
@@ -568,6 +596,11 @@ impl CodedFeatures {
             signatures: &self.signatures,
         }
     }
+}
+
+/// Why a search stopped at the end of the tile its rule fired in.
+fn tile_finished(why: String) -> String {
+    format!("{why} (then the rest of the tile voted)")
 }
 
 /// Stream an image's tiles through a search, tiles given as their features

@@ -361,6 +361,10 @@ pub fn search_tiles(
     let block = options.block.max(1);
     let mut reports: Vec<Vec<Report>> = Vec::new();
     let mut share = 0.0;
+    // a rule that fires inside a tile of several stops at the tile's end
+    // ([`super::Search::feed_tile`])
+    let streamed = tiles.len() > 1 && options.finish_tile;
+    let mut finishing = None;
     'tiles: for (k, &(features, area)) in tiles.iter().enumerate() {
         let words = features.words;
         fed += words.len();
@@ -403,14 +407,22 @@ pub fn search_tiles(
             for feature in &reports {
                 merged.tally.features += 1;
                 merged.merge(feature);
-                if merged.tally.features < options.min_features {
+                if merged.tally.features < options.min_features || finishing.is_some() {
                     continue;
                 }
                 if let Some(why) = rule.check(&merged) {
-                    stop = Some((StopKind::Rule, why));
-                    break 'tiles;
+                    if streamed && merged.tally.features < fed {
+                        finishing = Some(why);
+                    } else {
+                        stop = Some((StopKind::Rule, why));
+                        break 'tiles;
+                    }
                 }
             }
+        }
+        if let Some(why) = finishing.take() {
+            stop = Some((StopKind::Rule, super::tile_finished(why)));
+            break;
         }
     }
     let used = merged.tally.features;

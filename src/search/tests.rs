@@ -368,3 +368,49 @@ fn the_frame_posterior_is_the_posterior_under_a_uniform_prior() {
     assert_ne!(skewed.posterior, Some(posterior.clone()));
     assert_eq!(skewed.frame_posterior, Some(posterior));
 }
+
+/// With `finish_tile`, a rule that fires inside a tile of a streamed query
+/// stops at the tile's end, having voted the tile's other features; on a
+/// query extracted whole, or without it, the search stops where it fires.
+#[test]
+fn a_stop_inside_a_tile_votes_the_rest_of_the_tile() {
+    let (map, lists) = random_map(80, 5);
+    let query: Vec<u32> = lists[7].iter().copied().cycle().take(900).collect();
+    let o = SearchOptions {
+        finish_tile: true,
+        ..opts("stable-peak", Some(30.0), 11)
+    };
+    let quantize_from = |words: &[u32]| {
+        let words = words.to_vec();
+        move |indices: &[u32], out: &mut [u32], signed: &mut [u64]| {
+            for (o, &i) in out.iter_mut().zip(indices) {
+                *o = words[i as usize];
+            }
+            signed.fill(0);
+        }
+    };
+    // whole: one batch, it stops where the rule fires
+    let mut whole = Search::new(&map, &o);
+    assert!(whole.feed_tile(900, 1.0, true, quantize_from(&query), None));
+    let whole = whole.finish();
+    assert_eq!(whole.stop.kind, StopKind::Rule);
+    assert!(whole.stop.at_feature < 100, "{:?}", whole.stop);
+    // three tiles: it fires inside the first and the first's 300 are voted
+    let mut streamed = Search::new(&map, &o);
+    let tiles: Vec<&[u32]> = query.chunks(300).collect();
+    assert!(streamed.feed_tile(300, 1.0 / 3.0, false, quantize_from(tiles[0]), None));
+    let streamed = streamed.finish();
+    assert_eq!(streamed.stop.kind, StopKind::Rule);
+    assert_eq!(streamed.stop.at_feature, 300);
+    assert!(streamed.stop.detail.contains("the rest of the tile"), "{}", streamed.stop.detail);
+    // without finish_tile it stops where the rule fires, as on the whole
+    let plain = SearchOptions {
+        finish_tile: false,
+        ..o.clone()
+    };
+    let mut unfinished = Search::new(&map, &plain);
+    assert!(unfinished.feed_tile(300, 1.0 / 3.0, false, quantize_from(tiles[0]), None));
+    let unfinished = unfinished.finish();
+    assert_eq!(unfinished.stop.kind, StopKind::Rule);
+    assert!(unfinished.stop.at_feature < 100, "{:?}", unfinished.stop);
+}

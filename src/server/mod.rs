@@ -100,6 +100,8 @@ impl AppState {
                 hamming: s.hamming.then_some(crate::search::HammingWeights::DEFAULT),
                 place_window: s.place_window,
                 tile_order: s.tile_order,
+                // set per request, when its answer is verified
+                finish_tile: false,
             },
             max_top_n: config.limits.max_top_n,
         };
