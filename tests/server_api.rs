@@ -281,9 +281,11 @@ async fn the_trace_follows_the_race_to_the_stop_and_the_full_search_to_the_end()
             serde_json::from_slice::<serde_json::Value>(&body).unwrap()
         }
     };
-    let plain = answer("seed=3&rule=peak-mean&threshold=1&tiles=2x2").await;
+    // unverified: the search stops where the rule fires
+    let plain = answer("seed=3&rule=peak-mean&threshold=1&tiles=2x2&verify=false").await;
     assert!(plain.get("trace").is_none(), "no trace unless asked");
-    let traced = answer("seed=3&rule=peak-mean&threshold=1&tiles=2x2&trace=full").await;
+    let traced =
+        answer("seed=3&rule=peak-mean&threshold=1&tiles=2x2&trace=full&verify=false").await;
     // tracing changes nothing of the answer
     for key in ["candidates", "features", "stop", "tiles"] {
         assert_eq!(plain[key], traced[key], "{key}");
@@ -332,6 +334,29 @@ async fn the_trace_follows_the_race_to_the_stop_and_the_full_search_to_the_end()
         traced["tiles"]["extracted"].as_u64().unwrap()
     );
     assert!(!full["candidates"].as_array().unwrap().is_empty());
+    // verified: the rule fires at the same feature, and the search votes the
+    // rest of that tile before it stops, at the tile's end
+    let verified = answer("seed=3&rule=peak-mean&threshold=1&tiles=2x2&trace=full").await;
+    assert_eq!(verified["stop"]["kind"], "rule");
+    assert_eq!(verified["tiles"], traced["tiles"]);
+    let ends: Vec<u64> = verified["trace"]["tile_ends"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_u64().unwrap())
+        .collect();
+    let at = verified["stop"]["at_feature"].as_u64().unwrap();
+    assert_eq!(Some(&at), ends.last(), "{ends:?}");
+    assert!(at >= stop);
+    assert!(
+        verified["stop"]["detail"]
+            .as_str()
+            .unwrap()
+            .contains("the rest of the tile")
+            || at == stop,
+        "{}",
+        verified["stop"]
+    );
 }
 
 #[tokio::test]

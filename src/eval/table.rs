@@ -124,6 +124,9 @@ fn paper_rows(columns: &[&SettingSummary], parameter: &str) -> Vec<Vec<String>> 
         per_seed(&s.recall_at_1, pct)
     }));
     rows.push(row("recall@5".into(), &|s| pct_seeds(&s.recall_at_5)));
+    rows.push(row("recall@5, per seed".into(), &|s| {
+        per_seed(&s.recall_at_5, pct)
+    }));
     rows.push(row("recall top-1 @90%P by distinctness".into(), &|s| {
         pct_seeds(&s.recall90_top1_distinct)
     }));

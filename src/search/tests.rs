@@ -402,7 +402,11 @@ fn a_stop_inside_a_tile_votes_the_rest_of_the_tile() {
     let streamed = streamed.finish();
     assert_eq!(streamed.stop.kind, StopKind::Rule);
     assert_eq!(streamed.stop.at_feature, 300);
-    assert!(streamed.stop.detail.contains("the rest of the tile"), "{}", streamed.stop.detail);
+    assert!(
+        streamed.stop.detail.contains("the rest of the tile"),
+        "{}",
+        streamed.stop.detail
+    );
     // without finish_tile it stops where the rule fires, as on the whole
     let plain = SearchOptions {
         finish_tile: false,

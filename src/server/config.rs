@@ -654,9 +654,7 @@ impl Config {
         if rule.parameter_name().is_none() && s.threshold.is_some() {
             return Err(format!("rule `{}` takes no parameter", rule.name));
         }
-        let or_verified = s
-            .or_verified
-            .or(builtin.or_verified.filter(|_| is_builtin));
+        let or_verified = s.or_verified.or(builtin.or_verified.filter(|_| is_builtin));
         rule.or_verified(or_verified.map(f64::from))
             .map_err(|e| format!("{e} (or_verified = 0 turns the check off)"))
     }
