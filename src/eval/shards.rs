@@ -66,7 +66,7 @@ pub struct ShardRow {
 
 /// The settings simulated by default: every rule of the registry a sharded
 /// map runs ([`crate::search::stop::RuleInfo::shardable`]) at its example value (no warm-up), and
-/// the recommended default.
+/// the recommended default's vote rule (without its verified stop).
 pub fn default_settings() -> Vec<Setting> {
     let mut settings: Vec<Setting> = RULES
         .iter()
@@ -77,8 +77,14 @@ pub fn default_settings() -> Vec<Setting> {
             Setting::new(rule, 0)
         })
         .collect();
+    // the default's vote rule: its verified stop checks geometry, which
+    // shards do not simulate
     let recommended = SearchOptions::recommended();
-    settings.push(Setting::new(recommended.rule, recommended.min_features));
+    let votes = recommended
+        .rule
+        .or_verified(Some(0.0))
+        .expect("0 turns the check off");
+    settings.push(Setting::new(votes, recommended.min_features));
     settings
 }
 
