@@ -18,9 +18,6 @@
 
 use bowloc::eval::cache;
 use bowloc::features::{self, DecodeLimits, ExtractConfig, TileGrid};
-use bowloc::pipeline::code;
-use bowloc::search::rank::top_n;
-use bowloc::search::{HammingWeights, Needs, SearchOptions, Voter};
 use ndarray::{Array2, ArrayView2};
 use opencv::core::{Mat, Size, Vector};
 use opencv::prelude::*;
@@ -115,27 +112,9 @@ fn main() -> anyhow::Result<()> {
 
     for seed in 1..=3 {
         let p = cache::prepare(&root, words, seed, TileGrid::WHOLE)?;
-        let view = p.map.view();
         let recall = |images: Vec<Option<ArrayView2<'_, f32>>>| {
-            let (mut r1, mut r5, mut n) = (0, 0, 0);
-            for (q, truth) in p.dataset.truth.iter().enumerate() {
-                if truth.is_empty() {
-                    continue;
-                }
-                n += 1;
-                let Some(d) = images[q] else { continue };
-                let coded = code(&p.vocab, d);
-                let mut voter = Voter::with_needs(&view, Needs::default())
-                    .with_hamming(&p.map, HammingWeights::DEFAULT);
-                for (&w, &s) in coded.words.iter().zip(&coded.signatures) {
-                    voter.vote(w, s);
-                }
-                let top = top_n(&voter, 5, 0.0, None, SearchOptions::PLACE_WINDOW);
-                r1 += usize::from(top.first().is_some_and(|r| truth.contains(&r.id)));
-                r5 += usize::from(top.iter().any(|r| truth.contains(&r.id)));
-            }
-            let pct = |k: usize| 100.0 * k as f64 / n as f64;
-            format!("recall@1 {:.1}, recall@5 {:.1}", pct(r1), pct(r5))
+            let (r1, r5) = p.full_search_recall(&images);
+            format!("recall@1 {r1:.1}, recall@5 {r5:.1}")
         };
         println!(
             "seed {seed}: as they are {} | ×{SCALE} decoded whole {} | ×{SCALE} shrunk while decoding {}",

@@ -12,9 +12,6 @@
 
 use bowloc::eval::cache;
 use bowloc::features::{ExtractConfig, TileGrid};
-use bowloc::pipeline::code;
-use bowloc::search::rank::top_n;
-use bowloc::search::{HammingWeights, Needs, SearchOptions, Voter};
 use std::path::Path;
 
 fn main() -> anyhow::Result<()> {
@@ -33,36 +30,19 @@ fn main() -> anyhow::Result<()> {
         TileGrid::WHOLE,
         "small",
     )?;
-    let view = p.map.view();
-    let window = SearchOptions::PLACE_WINDOW;
     let smaller = format!("{side} px");
     for (name, set) in [("640 px", &p.queries), (smaller.as_str(), &small)] {
-        let (mut r1, mut r5, mut n, mut ms) = (0, 0, 0, vec![]);
-        for q in 0..set.len() {
-            let truth = &p.dataset.truth[q];
-            if truth.is_empty() {
-                continue;
-            }
-            n += 1;
-            ms.push(set.extract_ms(q) / p.queries.extract_ms(q));
-            let Some(d) = set.image(q) else { continue };
-            let coded = code(&p.vocab, d);
-            let mut voter = Voter::with_needs(&view, Needs::default())
-                .with_hamming(&p.map, HammingWeights::DEFAULT);
-            for (&w, &s) in coded.words.iter().zip(&coded.signatures) {
-                voter.vote(w, s);
-            }
-            let top = top_n(&voter, 5, 0.0, None, window);
-            r1 += usize::from(top.first().is_some_and(|r| truth.contains(&r.id)));
-            r5 += usize::from(top.iter().any(|r| truth.contains(&r.id)));
-        }
+        let with_match = (0..set.len()).filter(|&q| !p.dataset.truth[q].is_empty());
+        let mut ms: Vec<f64> = with_match
+            .map(|q| set.extract_ms(q) / p.queries.extract_ms(q))
+            .collect();
         ms.sort_by(f64::total_cmp);
+        let images: Vec<_> = (0..set.len()).map(|q| set.image(q)).collect();
+        let (r1, r5) = p.full_search_recall(&images);
         println!(
-            "{} seed {}, queries at {name}: recall@1 {:.1} %, recall@5 {:.1} %, median time {:.3}× that of 640 px",
+            "{} seed {}, queries at {name}: recall@1 {r1:.1} %, recall@5 {r5:.1} %, median time {:.3}× that of 640 px",
             p.dataset.name,
             p.vocab.meta().seed,
-            100.0 * r1 as f64 / n as f64,
-            100.0 * r5 as f64 / n as f64,
             ms[ms.len() / 2]
         );
     }

@@ -18,6 +18,8 @@ use crate::features::{DecodeLimits, ExtractConfig, Features, TileGrid};
 use crate::geometry::Keypoint;
 use crate::index::MapIndex;
 use crate::pipeline::{extract_all_timed, index_descriptors, train_vocabulary};
+use crate::search::rank::top_n;
+use crate::search::{HammingWeights, Needs, SearchOptions, Voter};
 use crate::store::{Store, StoreWriter};
 use crate::vocabulary::Vocabulary;
 use crate::vocabulary::kmeans::KmeansConfig;
@@ -336,6 +338,37 @@ pub struct Prepared {
     pub queries: DescriptorSet,
     pub vocab: Vocabulary,
     pub map: MapIndex,
+}
+
+impl Prepared {
+    /// The full search's recall@1 and recall@5 (in %) over the queries with
+    /// a match, each query given by its descriptors (`None`: no features,
+    /// a miss): every feature quantized and voted with Hamming weights, as
+    /// the service votes.
+    pub fn full_search_recall(&self, images: &[Option<ArrayView2<'_, f32>>]) -> (f64, f64) {
+        let view = self.map.view();
+        let (mut r1, mut r5, mut n) = (0, 0, 0);
+        for (q, truth) in self.dataset.truth.iter().enumerate() {
+            if truth.is_empty() {
+                continue;
+            }
+            n += 1;
+            let Some(d) = images.get(q).copied().flatten() else {
+                continue;
+            };
+            let coded = crate::pipeline::code(&self.vocab, d);
+            let mut voter = Voter::with_needs(&view, Needs::default())
+                .with_hamming(&self.map, HammingWeights::DEFAULT);
+            for (&w, &s) in coded.words.iter().zip(&coded.signatures) {
+                voter.vote(w, s);
+            }
+            let top = top_n(&voter, 5, 0.0, None, SearchOptions::PLACE_WINDOW);
+            r1 += usize::from(top.first().is_some_and(|r| truth.contains(&r.id)));
+            r5 += usize::from(top.iter().any(|r| truth.contains(&r.id)));
+        }
+        let pct = |k: usize| 100.0 * k as f64 / n.max(1) as f64;
+        (pct(r1), pct(r5))
+    }
 }
 
 /// [`Prepared`] for the dataset at `root`, a vocabulary of `words` words
