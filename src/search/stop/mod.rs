@@ -375,7 +375,6 @@ impl RuleSpec {
             Some(m) => Box::new(or_verified::OrVerified {
                 votes: rule,
                 min_inliers: m as usize,
-                answer: None,
             }),
         }
     }

@@ -34,8 +34,6 @@ pub const MAX_LOG_SCALE: f32 = 0.2;
 pub struct OrVerified {
     pub votes: Box<dyn StopRule>,
     pub min_inliers: usize,
-    /// The last check's answer.
-    pub answer: Option<CheckedAnswer>,
 }
 
 impl OrVerified {
@@ -86,7 +84,6 @@ impl StopRule for OrVerified {
             .map(|&(h, id)| (id, h))
             .collect();
         let answer = leader_check?.answer(&candidates, voted)?;
-        self.answer = Some(answer);
         self.verified_at_scale(&answer).then(|| {
             format!(
                 "answer {} verified at the query's scale: {} inliers ≥ {}, scale {:.2}",
