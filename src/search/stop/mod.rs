@@ -375,6 +375,7 @@ impl RuleSpec {
             Some(m) => Box::new(or_verified::OrVerified {
                 votes: rule,
                 min_inliers: m as usize,
+                candidates: context.top_n.max(1),
             }),
         }
     }

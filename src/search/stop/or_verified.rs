@@ -13,17 +13,13 @@
 //! where the query was.
 //!
 //! Stopping saves time only where it saves extraction, so the check runs at
-//! the end of each tile of a streamed query but the last (a check verifies
-//! up to [`CANDIDATES`] candidates, each a model fit: about half a
-//! millisecond); a search with no tile left, or extracted whole, has the vote
-//! rule alone.
+//! the end of each tile of a streamed query but the last (a check re-ranks
+//! the candidates the search returns, as the final verification does: up to
+//! its `verify.top_k` model fits, about half a millisecond each); a search
+//! with no tile left, or extracted whole, has the vote rule alone.
 
 use super::{CheckedAnswer, LeaderCheck, Needs, StopRule, VoteStats};
 use crate::search::Voted;
-
-/// The leading images a check verifies: the service's default
-/// `verify.top_k`.
-pub const CANDIDATES: usize = 10;
 
 /// Largest |ln scale| of an answer taken where the query was: its inliers
 /// spread at most e^0.2 ≈ 1.22 times more (or less) in the map image than
@@ -34,6 +30,10 @@ pub const MAX_LOG_SCALE: f32 = 0.2;
 pub struct OrVerified {
     pub votes: Box<dyn StopRule>,
     pub min_inliers: usize,
+    /// The candidates handed to the check: the search's top n
+    /// ([`RuleContext::top_n`](super::RuleContext::top_n)), which a
+    /// verifying search sets to at least its `verify.top_k`.
+    pub candidates: usize,
 }
 
 impl OrVerified {
@@ -53,7 +53,7 @@ impl StopRule for OrVerified {
 
     fn needs(&self) -> Needs {
         self.votes.needs().and(Needs {
-            top: CANDIDATES,
+            top: self.candidates,
             ..Needs::default()
         })
     }
@@ -80,7 +80,7 @@ impl StopRule for OrVerified {
         let candidates: Vec<(u32, f32)> = voter
             .top()
             .iter()
-            .take(CANDIDATES)
+            .take(self.candidates)
             .map(|&(h, id)| (id, h))
             .collect();
         let answer = leader_check?.answer(&candidates, voted)?;

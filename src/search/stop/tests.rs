@@ -696,3 +696,42 @@ fn or_verified_checks_only_at_a_tiles_end_with_tiles_left() {
     assert_eq!(c.calls, 1);
     assert!(why.is_some_and(|w| w.contains("answer 0 verified at the query's scale")));
 }
+
+/// A check that records how many candidates it was handed.
+struct CountingCheck(Vec<usize>);
+
+impl LeaderCheck for CountingCheck {
+    fn inliers(&mut self, _image: u32, _voted: &[Voted]) -> usize {
+        0
+    }
+
+    fn answer(&mut self, candidates: &[(u32, f32)], _voted: &[Voted]) -> Option<CheckedAnswer> {
+        self.0.push(candidates.len());
+        None
+    }
+}
+
+#[test]
+fn or_verified_hands_the_check_the_searchs_top_n() {
+    let map = one_word_each(8);
+    let view = map.view();
+    let rule = spec("stable-peak", 1000.0).or_verified(Some(12.0)).unwrap();
+    for (top_n, expected) in [(1, 1), (3, 3), (20, 8)] {
+        let mut rule_now = rule.build(&RuleContext {
+            top_n,
+            ..RuleContext::default()
+        });
+        let mut voter = Voter::with_needs(&view, rule_now.needs());
+        for w in 0..8 {
+            voter.vote(w, 0);
+        }
+        voter.set_expected_total(16.0);
+        let mut c = CountingCheck(Vec::new());
+        assert!(
+            rule_now
+                .check_with(&voter, &[VOTED_0], Some(&mut c), true)
+                .is_none()
+        );
+        assert_eq!(c.0, [expected], "top_n {top_n}");
+    }
+}
