@@ -11,12 +11,16 @@
 # extraction, default rule): both medians, their ratio and the median of the
 # per-query ratios.
 #
-#   [LATENCY_DATASET=rtabmap-loop] scripts/latency.sh [EVERY] [RULE-QUERY]
+#   [LATENCY_DATASET=rtabmap-loop] [LATENCY_SEEDS="1 2 3"] scripts/latency.sh [EVERY] [RULE-QUERY]
 #
 # LATENCY_DATASET: gardens-point (default; K = 5000 map, 960×540 queries) or
 # rtabmap-loop (K = 1000 map, 512×384 queries). EVERY: use every EVERY-th
 # query (default 10 for gardens-point: 20 images; 1 for rtabmap-loop: 44),
 # each sent 3 times. RULE-QUERY: extra query string, e.g. "rule=none".
+# LATENCY_SEEDS: the vocabulary seeds to build a map with and measure, one
+# server after the other (default 1): where a rule stops depends on the
+# vocabulary drawn, so the comparison is printed for each and the worst named.
+# The breakdown is printed for the first seed's map.
 # LATENCY_PLAN: the configured extraction plan (search.tiles), e.g.
 # "2x2+24,auto"; default the configuration's default.
 # The server learns the coarse pass (`tiles = "…,auto"`) from the first
@@ -25,53 +29,92 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 . scripts/lib/server.sh
 name=${LATENCY_DATASET:-gardens-point}
+seeds=${LATENCY_SEEDS:-1}
 case $name in
-  gardens-point) gardens_map 5000; dir=data/gardens-5000; default_every=10 ;;
-  rtabmap-loop) load_map; dir=data/load; default_every=1 ;;
+  gardens-point) default_every=10 ;;
+  rtabmap-loop) default_every=1 ;;
   *) echo "LATENCY_DATASET: gardens-point or rtabmap-loop, not $name" >&2; exit 2 ;;
 esac
+# the map for vocabulary seed $1, built if missing; prints its folder
+map_for() {
+  case $name in
+    gardens-point) gardens_map 5000 "$1" >&2; map_dir data/gardens-5000 "$1" ;;
+    rtabmap-loop) load_map "$1" >&2; map_dir data/load "$1" ;;
+  esac
+}
 every=${1:-$default_every}
 extra=${2:-}
 tmp=$(mktemp -d)
 trap 'stop_server; rm -rf "$tmp"' EXIT
 plan=${LATENCY_PLAN:+[search]
 tiles = \"$LATENCY_PLAN\"}
-server_config 1 4 "$dir" "$plan" >"$tmp/config.toml"
-start_server "$tmp/config.toml" "$tmp/server.log"
 src=../shared/datasets/$name
-: >"$tmp/rows"
-for pass in 1 2 3; do
-  awk -v e="$every" 'NR % e == 1 || e == 1' $src/queries.txt | while read -r q; do
-    client=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
-      --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass${extra:+&$extra}")
-    jq -r --arg c "$client" '[($c | tonumber) * 1000, .timings_ms.decode, .timings_ms.extract,
-      .timings_ms.quantize, .timings_ms.vote, .timings_ms.total, .features.fraction,
-      (.timings_ms.verify // 0), (if .verified == null then "no" else "yes" end)] | @tsv' \
-      "$tmp/answer.json" >>"$tmp/rows"
-  done
-done
 median() { sort -g | awk '{v[NR] = $1} END {print v[int((NR + 1) / 2)]}'; }
 col() { cut -f"$1" "$tmp/rows" | median; }
-share=$(awk -F'\t' '{print 100 * ($1 - $3) / $1}' "$tmp/rows" | median)
-echo "dataset=$name requests=$(wc -l <"$tmp/rows") rule=$(jq -r '.rule.name + " " + (.rule.value | tostring) + (if .rule.or_verified then " or verified \(.rule.or_verified)" else "" end)' "$tmp/answer.json")"
-echo "median_ms request=$(col 1) decode=$(col 2) extract=$(col 3) quantize=$(col 4) vote=$(col 5) verify=$(col 8) server_total=$(col 6) fraction_used=$(col 7)"
-echo "verified (geometric verification ran): $(cut -f9 "$tmp/rows" | grep -c yes) of $(wc -l <"$tmp/rows") requests"
-echo "median share of a request that is not SIFT extraction: ${share}%"
-: >"$tmp/pairs"
-for pass in 1 2 3; do
-  awk -v e="$every" 'NR % e == 1 || e == 1' $src/queries.txt | while read -r q; do
-    full=$(curl -s -o /dev/null -w '%{time_total}' -H 'Content-Type: image/jpeg' \
-      --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass&rule=none&tiles=1x1")
-    default=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
-      --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass${extra:+&$extra}")
-    tiles=$(jq -r '"\(.tiles.extracted)/\(.tiles.total)\t\(.tiles.grid)"' "$tmp/answer.json")
-    printf '%s\t%s\t%s\n' "$full" "$default" "$tiles" >>"$tmp/pairs"
+queries() { awk -v e="$every" 'NR % e == 1 || e == 1' $src/queries.txt; }
+
+# Where the default configuration's request time goes (one map).
+breakdown() {
+  : >"$tmp/rows"
+  for pass in 1 2 3; do
+    queries | while read -r q; do
+      client=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
+        --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass${extra:+&$extra}")
+      jq -r --arg c "$client" '[($c | tonumber) * 1000, .timings_ms.decode, .timings_ms.extract,
+        .timings_ms.quantize, .timings_ms.vote, .timings_ms.total, .features.fraction,
+        (.timings_ms.verify // 0), (if .verified == null then "no" else "yes" end)] | @tsv' \
+        "$tmp/answer.json" >>"$tmp/rows"
+    done
   done
+  local share
+  share=$(awk -F'\t' '{print 100 * ($1 - $3) / $1}' "$tmp/rows" | median)
+  echo "dataset=$name requests=$(wc -l <"$tmp/rows") rule=$(jq -r '.rule.name + " " + (.rule.value | tostring) + (if .rule.or_verified then " or verified \(.rule.or_verified)" else "" end)' "$tmp/answer.json")"
+  echo "median_ms request=$(col 1) decode=$(col 2) extract=$(col 3) quantize=$(col 4) vote=$(col 5) verify=$(col 8) server_total=$(col 6) fraction_used=$(col 7)"
+  echo "verified (geometric verification ran): $(cut -f9 "$tmp/rows" | grep -c yes) of $(wc -l <"$tmp/rows") requests"
+  echo "median share of a request that is not SIFT extraction: ${share}%"
+}
+
+# Each query twice in turn, whole-image full search and the default; prints
+# the comparison and appends "seed ratio-of-medians per-query-ratio" to
+# $tmp/ratios.
+compare() {
+  : >"$tmp/pairs"
+  for pass in 1 2 3; do
+    queries | while read -r q; do
+      full=$(curl -s -o /dev/null -w '%{time_total}' -H 'Content-Type: image/jpeg' \
+        --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass&rule=none&tiles=1x1")
+      default=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
+        --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass${extra:+&$extra}")
+      tiles=$(jq -r '"\(.tiles.extracted)/\(.tiles.total)\t\(.tiles.grid)"' "$tmp/answer.json")
+      printf '%s\t%s\t%s\n' "$full" "$default" "$tiles" >>"$tmp/pairs"
+    done
+  done
+  local full_ms default_ms per_query tiles coarse ratio
+  full_ms=$(cut -f1 "$tmp/pairs" | median | awk '{print $1 * 1000}')
+  default_ms=$(cut -f2 "$tmp/pairs" | median | awk '{print $1 * 1000}')
+  per_query=$(awk -F'\t' '{print $2 / $1}' "$tmp/pairs" | median)
+  tiles=$(awk -F'\t' '{split($3, t, "/"); s += t[1] / t[2]} END {printf "%.3f", s / NR}' "$tmp/pairs")
+  coarse=$(awk -F'\t' '$4 ~ /coarse/ {c++} END {printf "%d of %d", c, NR}' "$tmp/pairs")
+  ratio=$(awk -v a="$default_ms" -v b="$full_ms" 'BEGIN {printf "%.3f", a / b}')
+  echo "vocabulary seed $1: full search, whole image: median ${full_ms} ms; default${extra:+ ($extra)}, streaming: median ${default_ms} ms"
+  echo "vocabulary seed $1: ratio of medians $ratio; median per-query ratio ${per_query}; mean share of tiles extracted ${tiles}; coarse pass first in ${coarse} requests"
+  echo "$1 $ratio $per_query" >>"$tmp/ratios"
+}
+
+: >"$tmp/ratios"
+first=1
+for seed in $seeds; do
+  dir=$(map_for "$seed")
+  server_config 1 4 "$dir" "$plan" >"$tmp/config.toml"
+  start_server "$tmp/config.toml" "$tmp/server.log"
+  if [ "$first" = 1 ]; then
+    breakdown
+    first=0
+  fi
+  compare "$seed"
+  stop_server
 done
-full_ms=$(cut -f1 "$tmp/pairs" | median | awk '{print $1 * 1000}')
-default_ms=$(cut -f2 "$tmp/pairs" | median | awk '{print $1 * 1000}')
-per_query=$(awk -F'\t' '{print $2 / $1}' "$tmp/pairs" | median)
-tiles=$(awk -F'\t' '{split($3, t, "/"); s += t[1] / t[2]} END {printf "%.3f", s / NR}' "$tmp/pairs")
-coarse=$(awk -F'\t' '$4 ~ /coarse/ {c++} END {printf "%d of %d", c, NR}' "$tmp/pairs")
-echo "full search, whole image: median ${full_ms} ms; default${extra:+ ($extra)}, streaming: median ${default_ms} ms"
-echo "ratio of medians $(awk -v a="$default_ms" -v b="$full_ms" 'BEGIN {printf "%.3f", a / b}'); median per-query ratio ${per_query}; mean share of tiles extracted ${tiles}; coarse pass first in ${coarse} requests"
+if [ "$(wc -l <"$tmp/ratios")" -gt 1 ]; then
+  awk '{r = r sep $2; p = p sep $3; sep = " / "; if ($2 > w) {w = $2; ws = $1}}
+    END {print "over vocabulary seeds " NR ": ratio of medians " r " (worst " w ", seed " ws "); median per-query ratio " p}' "$tmp/ratios"
+fi

@@ -2,16 +2,20 @@
 # (load.sh, overload.sh, replicas.sh, schemathesis.sh). Source it from the repository's
 # root:  . scripts/lib/server.sh
 #
-#   load_map                 the rtabmap-loop map (K = 1000) in data/load/,
-#                            built on first use
+#   load_map [SEED]          the rtabmap-loop map (K = 1000, vocabulary
+#                            seed SEED, default 1) in data/load/ (seed 1)
+#                            or data/load-sSEED/, built on first use
 #   start_server CONFIG LOG [FLAG…]
 #                            start the server (with these flags of `serve`),
 #                            wait for /readyz; sets SERVER_PID and
 #                            SERVER_ADDR (127.0.0.1:PORT)
 #   stop_server              SIGTERM, then wait for it to exit
 #   server_rss_kib           the server's resident memory in KiB
-#   gardens_map K            the gardens-point map (K words) in
-#                            data/gardens-K/, built on first use
+#   gardens_map K [SEED]     the gardens-point map (K words, vocabulary
+#                            seed SEED, default 1) in data/gardens-K/ (seed
+#                            1) or data/gardens-K-sSEED/, built on first use
+#   map_dir BASE SEED        where those maps are: BASE for seed 1, else
+#                            BASE-sSEED
 #   server_config WORKERS QUEUE [DIR] [EXTRA-TOML]
 #                            a loopback configuration for the map in DIR
 #                            (default data/load), printed
@@ -25,14 +29,21 @@
 BOWLOC_BIN=./target/release/bowloc
 DATASET=../shared/datasets/rtabmap-loop
 
+map_dir() {
+  if [ "$2" = 1 ]; then echo "$1"; else echo "$1-s$2"; fi
+}
+
 load_map() {
   [ -x "$BOWLOC_BIN" ] || cargo build --release
-  mkdir -p data/load
-  if [ ! -f data/load/map.bowmap ]; then
-    "$BOWLOC_BIN" --log warn vocab build --images "$DATASET/map.txt" --words 1000 --seed 1 \
-      --out data/load/vocab.bowvoc
-    "$BOWLOC_BIN" --log warn map build --vocab data/load/vocab.bowvoc --images "$DATASET/map.txt" \
-      --out data/load/map.bowmap
+  local seed=${1:-1}
+  local dir
+  dir=$(map_dir data/load "$seed")
+  mkdir -p "$dir"
+  if [ ! -f "$dir/map.bowmap" ]; then
+    "$BOWLOC_BIN" --log warn vocab build --images "$DATASET/map.txt" --words 1000 --seed "$seed" \
+      --out "$dir/vocab.bowvoc"
+    "$BOWLOC_BIN" --log warn map build --vocab "$dir/vocab.bowvoc" --images "$DATASET/map.txt" \
+      --out "$dir/map.bowmap"
   fi
 }
 
@@ -65,10 +76,12 @@ server_rss_kib() {
 
 gardens_map() {
   [ -x "$BOWLOC_BIN" ] || cargo build --release
-  local dir=data/gardens-$1 src=../shared/datasets/gardens-point
+  local seed=${2:-1} src=../shared/datasets/gardens-point
+  local dir
+  dir=$(map_dir "data/gardens-$1" "$seed")
   mkdir -p "$dir"
   if [ ! -f "$dir/map.bowmap" ]; then
-    "$BOWLOC_BIN" --log warn vocab build --images "$src/map.txt" --words "$1" --seed 1 \
+    "$BOWLOC_BIN" --log warn vocab build --images "$src/map.txt" --words "$1" --seed "$seed" \
       --out "$dir/vocab.bowvoc"
     "$BOWLOC_BIN" --log warn map build --vocab "$dir/vocab.bowvoc" --images "$src/map.txt" \
       --out "$dir/map.bowmap" --name gardens-point

@@ -88,6 +88,11 @@ fn init_logging(filter: &str, format: LogFormat) {
 
 pub fn run() -> ExitCode {
     let cli = Cli::parse();
+    if bowloc::features::keeps_image_buffers() && !bowloc::features::keep_image_buffers() {
+        eprintln!(
+            "warning: malloc kept its own thresholds; image buffers may be mapped anew per image"
+        );
+    }
     let result = match cli.command {
         Command::Serve(a) => serve::config(&a).and_then(|config| {
             init_logging(&cli.log, config.server.log_format);

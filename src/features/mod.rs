@@ -2,6 +2,7 @@
 //! keypoints and descriptors out (an `ndarray` matrix). This is the only module that touches
 //! OpenCV; everything downstream works on plain arrays.
 
+mod buffers;
 mod coarse_choice;
 mod config;
 mod corners;
@@ -11,6 +12,7 @@ pub mod fit;
 mod thumbnail;
 mod tiles;
 
+pub use buffers::{KEEP_BUFFERS_VAR, keep_image_buffers, keeps_image_buffers};
 pub use coarse_choice::CoarseChoice;
 pub use config::{ExtractConfig, SiftParams};
 pub use decode::{DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe};

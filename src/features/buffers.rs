@@ -1,0 +1,57 @@
+//! Keeping OpenCV's image buffers mapped between requests. SIFT allocates
+//! each image's scale space (about 45 MB for a 640 px frame, upsampled ×2)
+//! in blocks of a few MB and frees it when the call returns. glibc's malloc
+//! serves such blocks with fresh mappings or trims them off its heaps once
+//! they are free, depending on what the process allocated before, so the
+//! next image may fault every page in again: measured through the server,
+//! 20 ms more on a 45 ms whole-image extraction of an rtabmap-loop query
+//! (docs/performance.md, "Buffers kept mapped"). Fixed thresholds make every
+//! image reuse the memory the last one freed, whatever ran before.
+
+/// The environment variable that, set to `0`, leaves malloc's defaults
+/// (to measure what keeping the buffers saves).
+pub const KEEP_BUFFERS_VAR: &str = "BOWLOC_KEEP_BUFFERS";
+
+/// Whether the process should keep its image buffers: unless
+/// [`KEEP_BUFFERS_VAR`] is `0`.
+pub fn keeps_image_buffers() -> bool {
+    std::env::var(KEEP_BUFFERS_VAR).map_or(true, |v| v.trim() != "0")
+}
+
+/// Blocks below this come from malloc's heaps, not their own mapping:
+/// glibc's largest (32 MiB on 64-bit), above any one buffer of a 640 px
+/// scale space.
+const MMAP_THRESHOLD: i32 = 32 << 20;
+
+/// Free memory at a heap's top beyond this goes back to the system: a few
+/// scale spaces, so a worker keeps its own.
+const TRIM_THRESHOLD: i32 = 256 << 20;
+
+/// Fix malloc's thresholds for the whole process (its C++ side included).
+/// Call once at start, before the threads that extract. Returns whether the
+/// allocator took both (always, with glibc; never elsewhere).
+#[cfg(target_env = "gnu")]
+pub fn keep_image_buffers() -> bool {
+    // SAFETY: mallopt only sets allocator parameters; both values are in
+    // the ranges glibc accepts.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, MMAP_THRESHOLD) == 1
+            && libc::mallopt(libc::M_TRIM_THRESHOLD, TRIM_THRESHOLD) == 1
+    }
+}
+
+#[cfg(not(target_env = "gnu"))]
+pub fn keep_image_buffers() -> bool {
+    false
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[cfg(target_env = "gnu")]
+    #[test]
+    fn glibc_takes_both_thresholds() {
+        assert!(keep_image_buffers());
+    }
+}
