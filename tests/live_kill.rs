@@ -70,6 +70,9 @@ fn start(config: &Path) -> (Child, SocketAddr) {
         .arg(config)
         .args(["--listen", &addr.to_string()])
         .env("BOWLOC_AUTH__WRITE_TOKEN", TOKEN)
+        // the process's own variable, not a configuration key: the server
+        // must start with it (and glibc's malloc defaults)
+        .env("BOWLOC_KEEP_BUFFERS", "0")
         .stdout(Stdio::null())
         .stderr(Stdio::inherit())
         .spawn()

@@ -470,9 +470,18 @@ fn describe(e: figment::Error) -> String {
     }
 }
 
+/// The configuration key [`crate::features::KEEP_BUFFERS_VAR`] would be
+/// read as: not one, it is set for the process before any configuration.
+fn keep_buffers_key() -> String {
+    crate::features::KEEP_BUFFERS_VAR
+        .trim_start_matches(ENV_PREFIX)
+        .to_lowercase()
+}
+
 impl Config {
     /// Built-in defaults, then the TOML file at `path`, then `BOWLOC_`
-    /// environment variables; checked.
+    /// environment variables (but the process's own,
+    /// [`KEEP_BUFFERS_VAR`](crate::features::KEEP_BUFFERS_VAR)); checked.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         if !path.is_file() {
             return Err(ConfigError::new(format!(
@@ -482,7 +491,11 @@ impl Config {
         }
         let figment = Figment::from(Serialized::defaults(Config::default()))
             .merge(Toml::file_exact(path))
-            .merge(Env::prefixed(ENV_PREFIX).split("__"));
+            .merge(
+                Env::prefixed(ENV_PREFIX)
+                    .ignore(&[keep_buffers_key().as_str()])
+                    .split("__"),
+            );
         let config: Config = figment.extract().map_err(|e| {
             let all: Vec<String> = e.into_iter().map(describe).collect();
             ConfigError::new(format!("invalid configuration: {}", all.join("; ")))
