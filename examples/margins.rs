@@ -20,9 +20,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    if features::keeps_image_buffers() {
-        features::keep_image_buffers();
-    }
+    features::keep_image_buffers();
     features::set_opencv_threads(1);
     let data = Dataset::open(std::path::Path::new(&args[1]))?;
     let mut plans: Vec<TileGrid> = vec!["1x1+0".parse().map_err(anyhow::Error::msg)?];

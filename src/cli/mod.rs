@@ -88,7 +88,7 @@ fn init_logging(filter: &str, format: LogFormat) {
 
 pub fn run() -> ExitCode {
     let cli = Cli::parse();
-    if bowloc::features::keeps_image_buffers() && !bowloc::features::keep_image_buffers() {
+    if bowloc::features::keep_image_buffers() == bowloc::features::Buffers::Refused {
         eprintln!(
             "warning: malloc kept its own thresholds; image buffers may be mapped anew per image"
         );

@@ -12,10 +12,15 @@
 /// (to measure what keeping the buffers saves).
 pub const KEEP_BUFFERS_VAR: &str = "BOWLOC_KEEP_BUFFERS";
 
-/// Whether the process should keep its image buffers: unless
-/// [`KEEP_BUFFERS_VAR`] is `0`.
-pub fn keeps_image_buffers() -> bool {
-    std::env::var(KEEP_BUFFERS_VAR).map_or(true, |v| v.trim() != "0")
+/// What [`keep_image_buffers`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Buffers {
+    /// The thresholds are fixed.
+    Kept,
+    /// [`KEEP_BUFFERS_VAR`] is `0`: malloc's defaults stay.
+    LeftToMalloc,
+    /// The allocator refused the thresholds (not glibc).
+    Refused,
 }
 
 /// Blocks below this come from malloc's heaps, not their own mapping:
@@ -27,11 +32,23 @@ const MMAP_THRESHOLD: i32 = 32 << 20;
 /// scale spaces, so a worker keeps its own.
 const TRIM_THRESHOLD: i32 = 256 << 20;
 
-/// Fix malloc's thresholds for the whole process (its C++ side included).
-/// Call once at start, before the threads that extract. Returns whether the
-/// allocator took both (always, with glibc; never elsewhere).
+/// Fix malloc's thresholds for the whole process (its C++ side included),
+/// unless [`KEEP_BUFFERS_VAR`] is `0`. Call once at start, before the
+/// threads that extract.
+pub fn keep_image_buffers() -> Buffers {
+    if std::env::var(KEEP_BUFFERS_VAR).is_ok_and(|v| v.trim() == "0") {
+        Buffers::LeftToMalloc
+    } else if set_thresholds() {
+        Buffers::Kept
+    } else {
+        Buffers::Refused
+    }
+}
+
+/// Whether the allocator took both thresholds (always, with glibc; never
+/// elsewhere).
 #[cfg(target_env = "gnu")]
-pub fn keep_image_buffers() -> bool {
+fn set_thresholds() -> bool {
     // SAFETY: mallopt only sets allocator parameters; both values are in
     // the ranges glibc accepts.
     unsafe {
@@ -41,7 +58,7 @@ pub fn keep_image_buffers() -> bool {
 }
 
 #[cfg(not(target_env = "gnu"))]
-pub fn keep_image_buffers() -> bool {
+fn set_thresholds() -> bool {
     false
 }
 
@@ -52,6 +69,6 @@ mod tests {
     #[cfg(target_env = "gnu")]
     #[test]
     fn glibc_takes_both_thresholds() {
-        assert!(keep_image_buffers());
+        assert!(set_thresholds());
     }
 }

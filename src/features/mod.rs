@@ -12,7 +12,7 @@ pub mod fit;
 mod thumbnail;
 mod tiles;
 
-pub use buffers::{KEEP_BUFFERS_VAR, keep_image_buffers, keeps_image_buffers};
+pub use buffers::{Buffers, KEEP_BUFFERS_VAR, keep_image_buffers};
 pub use coarse_choice::CoarseChoice;
 pub use config::{ExtractConfig, SiftParams};
 pub use decode::{DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe};
