@@ -15,8 +15,9 @@
 //! order, which also counts FAST corners per tile.
 
 use bowloc::dataset::Dataset;
+use bowloc::eval::timing::median;
 use bowloc::features::{self, DecodeLimits, ExtractConfig, TileGrid, Tiles};
-use bowloc::pipeline::extract_tiled;
+use bowloc::pipeline::extract_interleaved;
 use bowloc::search::TileOrder;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use std::path::PathBuf;
@@ -39,11 +40,6 @@ fn config(max_side: u32) -> ExtractConfig {
     }
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn extract_ms(image: &[u8], c: &ExtractConfig) -> (f64, usize) {
     let start = Instant::now();
     let d = features::extract(
@@ -61,8 +57,8 @@ fn summary(images: &[Vec<u8>]) {
         let runs: Vec<(f64, usize)> = images.iter().map(|i| extract_ms(i, &c)).collect();
         eprintln!(
             "max_side {side:>4}: median {:.1} ms per image, median {} features",
-            median(runs.iter().map(|r| r.0).collect()),
-            median(runs.iter().map(|r| r.1 as f64).collect())
+            median(&runs.iter().map(|r| r.0).collect::<Vec<_>>()),
+            median(&runs.iter().map(|r| r.1 as f64).collect::<Vec<_>>())
         );
     }
     thread_layouts(images, &config(640));
@@ -87,30 +83,27 @@ fn tile_plans(images: &[Vec<u8>], c: &ExtractConfig) {
     let mut measured = vec![Vec::new(); plans.len()];
     for image in images {
         let decoded = features::decode(image, DecodeLimits::default(), c.max_side).unwrap();
-        let mut best = vec![(f64::INFINITY, 0usize, 0.0, 0usize); plans.len()];
-        for _round in 0..3 {
-            for (p, plan) in plans.iter().enumerate() {
-                let (f, units) = extract_tiled(&decoded, c, *plan).unwrap();
-                let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
-                let total: f64 = units.iter().map(|u| ms(u.extract)).sum();
-                if total < best[p].0 {
-                    best[p] = (total, f.len(), ms(units[0].extract), units[0].features);
-                }
-            }
-        }
-        for (p, b) in best.into_iter().enumerate() {
-            measured[p].push(b);
+        let each = extract_interleaved(&decoded, c, &plans, 3).unwrap();
+        for (p, e) in each.iter().enumerate() {
+            let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+            let total: f64 = e.tiles.iter().map(|t| ms(t.extract)).sum();
+            measured[p].push((
+                total,
+                e.features.len(),
+                ms(e.tiles[0].extract),
+                e.tiles[0].features,
+            ));
         }
     }
     let whole = &measured[0];
     for (plan, m) in plans.iter().zip(&measured) {
-        let ratio = |f: &dyn Fn(usize) -> f64| median((0..m.len()).map(f).collect());
+        let ratio = |f: &dyn Fn(usize) -> f64| median(&(0..m.len()).map(f).collect::<Vec<_>>());
         eprintln!(
             "plan {plan:<14}: full extraction {:.2}× the whole image's CPU time ({:.1} ms), \
              keypoints {:.3}×; first unit {:.2}× of the whole image's time for {:.2} of the plan's keypoints \
              (medians over {} images)",
             ratio(&|i| m[i].0 / whole[i].0),
-            median(m.iter().map(|x| x.0).collect()),
+            median(&m.iter().map(|x| x.0).collect::<Vec<_>>()),
             ratio(&|i| m[i].1 as f64 / whole[i].1.max(1) as f64),
             ratio(&|i| m[i].2 / whole[i].0),
             ratio(&|i| m[i].3 as f64 / m[i].1.max(1) as f64),
@@ -141,7 +134,7 @@ fn layout(images: &[Vec<u8>], c: &ExtractConfig, requests: usize, threads: usize
             .collect()
     });
     let throughput = latencies.len() as f64 / start.elapsed().as_secs_f64();
-    (median(latencies), throughput)
+    (median(&latencies), throughput)
 }
 
 /// OpenCV's own threads versus request-level parallelism on two cores: the

@@ -10,6 +10,7 @@
 //! reused.
 
 use bowloc::dataset::Dataset;
+use bowloc::eval::timing::median;
 use bowloc::features::{self, DecodeLimits};
 use bowloc::pipeline::{Localizer, build_map, build_vocabulary};
 use bowloc::search::{RuleSpec, SearchOptions};
@@ -48,11 +49,6 @@ fn localizer() -> (Localizer, Vec<Vec<u8>>) {
     (Localizer::open(&vpath, &mpath, true).unwrap(), queries)
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 /// Median per stage over the query set, printed for docs/performance.md.
 /// Returns the median search time (quantize + vote, per query) and the median
 /// fraction of features used.
@@ -80,7 +76,7 @@ fn stage_summary(
             }
         }
     }
-    let [decode, extract, quantize, vote, total, fraction, search] = stages.map(median);
+    let [decode, extract, quantize, vote, total, fraction, search] = stages.map(|s| median(&s));
     eprintln!(
         "{label}: median ms decode {decode:.2}, extract {extract:.2}, quantize {quantize:.2}, vote {vote:.3}, \
          search (quantize + vote) {search:.2}, total {total:.2}; \

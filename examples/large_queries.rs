@@ -17,6 +17,7 @@
 //! It reads (or fills) the eval's caches in `data/eval-cache/<dataset>`.
 
 use bowloc::eval::cache;
+use bowloc::eval::timing::median;
 use bowloc::features::{self, DecodeLimits, ExtractConfig, TileGrid};
 use ndarray::{Array2, ArrayView2};
 use opencv::core::{Mat, Size, Vector};
@@ -63,11 +64,6 @@ fn extract(
     Ok((f.descriptors, decoded, extracted))
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let root = PathBuf::from(
@@ -88,7 +84,7 @@ fn main() -> anyhow::Result<()> {
         shrunk.push(extract(&jpeg, config.max_side, &config)?);
     }
     let ms = |set: &[(Array2<f32>, f64, f64)], step: fn(&(Array2<f32>, f64, f64)) -> f64| {
-        median(set.iter().map(step).collect())
+        median(&set.iter().map(step).collect::<Vec<_>>())
     };
     for (name, set) in [
         ("decoded whole", &whole),
@@ -107,7 +103,7 @@ fn main() -> anyhow::Result<()> {
         .map(|(w, s)| (s.1 + s.2) / (w.1 + w.2));
     println!(
         "decode + extract, shrunk against whole: median ratio {:.3} per image",
-        median(ratios.collect())
+        median(&ratios.collect::<Vec<_>>())
     );
 
     for seed in 1..=3 {

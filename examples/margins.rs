@@ -10,13 +10,9 @@
 //! ```
 
 use bowloc::dataset::Dataset;
+use bowloc::eval::timing::median;
 use bowloc::features::{self, DecodeLimits, ExtractConfig, TileGrid};
-use bowloc::pipeline::extract_tiled;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
+use bowloc::pipeline::extract_interleaved;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -33,26 +29,18 @@ fn main() -> anyhow::Result<()> {
     for q in &data.queries {
         let bytes = std::fs::read(&q.path)?;
         let decoded = features::decode(&bytes, DecodeLimits::default(), c.max_side)?;
-        let mut best = vec![(f64::INFINITY, 0usize); plans.len()];
-        for _round in 0..3 {
-            for (p, plan) in plans.iter().enumerate() {
-                let (f, units) = extract_tiled(&decoded, &c, *plan)?;
-                let ms: f64 = units.iter().map(|u| u.extract.as_secs_f64() * 1e3).sum();
-                if ms < best[p].0 {
-                    best[p] = (ms, f.len());
-                }
-            }
-        }
-        for (p, b) in best.iter().enumerate() {
-            cost[p].push(b.0 / best[0].0);
-            points[p].push(b.1 as f64 / best[0].1.max(1) as f64);
+        let each = extract_interleaved(&decoded, &c, &plans, 3)?;
+        let ms = |p: usize| -> f64 { each[p].tiles.iter().map(|t| t.extract.as_secs_f64()).sum() };
+        for p in 0..plans.len() {
+            cost[p].push(ms(p) / ms(0));
+            points[p].push(each[p].features.len() as f64 / each[0].features.len().max(1) as f64);
         }
     }
     for (p, plan) in plans.iter().enumerate() {
         println!(
             "{plan}: extraction {:.3}× the whole image's, keypoints {:.3}× (medians over {} images)",
-            median(cost[p].clone()),
-            median(points[p].clone()),
+            median(&cost[p]),
+            median(&points[p]),
             cost[p].len()
         );
     }

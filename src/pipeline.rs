@@ -128,6 +128,37 @@ pub fn extract_tiled(
     Ok((features, costs))
 }
 
+/// A decoded image extracted with each grid of `grids` in turn, `rounds`
+/// times over, keeping for each grid its cheapest round (by the thread's CPU
+/// time for the whole extraction, corner counting included). The grids are
+/// timed back to back under the same load, so their ratios hold even when
+/// the machine's speed drifts between minutes. Each result's `decode` is
+/// zero: the caller decoded the image.
+pub fn extract_interleaved(
+    image: &features::GrayImage,
+    config: &ExtractConfig,
+    grids: &[TileGrid],
+    rounds: usize,
+) -> Result<Vec<Extracted>, FeatureError> {
+    let mut best: Vec<Option<Extracted>> = vec![None; grids.len()];
+    for _round in 0..rounds.max(1) {
+        for (kept, &grid) in best.iter_mut().zip(grids) {
+            let started = ThreadTime::now();
+            let (features, tiles) = extract_tiled(image, config, grid)?;
+            let extract = started.elapsed();
+            if kept.as_ref().is_none_or(|k| extract < k.extract) {
+                *kept = Some(Extracted {
+                    features,
+                    decode: Duration::ZERO,
+                    extract,
+                    tiles,
+                });
+            }
+        }
+    }
+    Ok(best.into_iter().flatten().collect())
+}
+
 /// Features (keypoints and descriptors) of every image, in parallel, one
 /// image per core. Images that
 /// cannot be read or decoded are `None`, each named in a warning, with a count
@@ -156,22 +187,40 @@ pub fn extract_all_timed(
     strict: bool,
     what: &str,
 ) -> anyhow::Result<Vec<Option<Extracted>>> {
+    let together = extract_all_together(images, config, &[grid], 1, limits, strict, what)?;
+    Ok(together
+        .into_iter()
+        .map(|e| e.and_then(|e| e.into_iter().next()))
+        .collect())
+}
+
+/// [`extract_all_timed`] with several grids at once: each image is decoded
+/// once and extracted with every grid back to back, `rounds` times over
+/// ([`extract_interleaved`]), so that the grids' times compare image by
+/// image. Per image, one [`Extracted`] per grid, in the order of `grids`.
+pub fn extract_all_together(
+    images: &[ImageRef],
+    config: &ExtractConfig,
+    grids: &[TileGrid],
+    rounds: usize,
+    limits: DecodeLimits,
+    strict: bool,
+    what: &str,
+) -> anyhow::Result<Vec<Option<Vec<Extracted>>>> {
     features::set_opencv_threads(1);
     let bar = progress_bar(images.len() as u64, what);
-    let results: Vec<Result<Extracted, FeatureError>> = images
+    let results: Vec<Result<Vec<Extracted>, FeatureError>> = images
         .par_iter()
         .map(|image| {
             let started = ThreadTime::now();
             let r =
                 features::decode_file(&image.path, limits, config.max_side).and_then(|decoded| {
                     let read = started.elapsed();
-                    let (features, tiles) = extract_tiled(&decoded, config, grid)?;
-                    Ok(Extracted {
-                        features,
-                        decode: read,
-                        extract: started.elapsed() - read,
-                        tiles,
-                    })
+                    let mut each = extract_interleaved(&decoded, config, grids, rounds)?;
+                    for e in &mut each {
+                        e.decode = read;
+                    }
+                    Ok(each)
                 });
             bar.inc(1);
             r
@@ -183,7 +232,7 @@ pub fn extract_all_timed(
     for (image, result) in images.iter().zip(results) {
         match result {
             Ok(e) => {
-                if e.features.is_empty() {
+                if e.first().is_some_and(|e| e.features.is_empty()) {
                     tracing::warn!(image = %image.name, "no features found");
                 }
                 out.push(Some(e));

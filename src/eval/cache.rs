@@ -5,11 +5,14 @@
 //!
 //! Descriptor files are store files (magic `BOWLOCDE`) with four sections:
 //! `meta` (JSON: the extraction settings, each image's name and file size,
-//! whether it was readable, and how long it took to decode and extract),
+//! whether it was readable, how long it took to decode and extract, and
+//! which other grids were timed with it),
 //! `descriptors` (f32, all rows stacked, 128 wide), `keypoints` (f32, the
 //! keypoint of each row: x, y, size, angle, response) and `offsets` (u64,
 //! image i owns rows `offsets[i]..offsets[i + 1]`). A file made with other settings or
-//! other images is rebuilt, not reused. Vocabulary and map file names carry
+//! other images is rebuilt, not reused. The queries cut in tiles and whole
+//! are extracted together, image by image, so the eval's "× whole-image"
+//! times compare extractions taken under the same load. Vocabulary and map file names carry
 //! the checksum of the descriptors they come from, so they cannot go stale.
 
 use super::tiles::{Query, Tile};
@@ -17,7 +20,7 @@ use crate::dataset::ImageRef;
 use crate::features::{DecodeLimits, ExtractConfig, Features, TileGrid};
 use crate::geometry::Keypoint;
 use crate::index::MapIndex;
-use crate::pipeline::{extract_all_timed, index_descriptors, train_vocabulary};
+use crate::pipeline::{Extracted, extract_all_together, index_descriptors, train_vocabulary};
 use crate::search::rank::top_n;
 use crate::search::{HammingWeights, Needs, SearchOptions, Voter};
 use crate::store::{Store, StoreWriter};
@@ -26,7 +29,7 @@ use crate::vocabulary::kmeans::KmeansConfig;
 use anyhow::Context;
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 const MAGIC: [u8; 8] = *b"BOWLOCDE";
 /// 2: keypoints beside the descriptors; 3: tiles and their times; 4: the
@@ -62,7 +65,17 @@ pub struct DescriptorMeta {
     /// Per image, per tile in grid order: features, area share, time.
     #[serde(default)]
     pub tiles: Vec<Vec<Tile>>,
+    /// The other grids the images were extracted with back to back, image
+    /// by image, each time the cheapest of [`ROUNDS_TOGETHER`] rounds
+    /// ([`descriptors_together`]): times in files extracted together compare
+    /// image by image; times in files extracted apart were taken minutes
+    /// apart, when a shared machine may have run at another speed.
+    #[serde(default)]
+    pub timed_with: Vec<TileGrid>,
 }
+
+/// Rounds of extraction per image when several grids are timed together.
+pub const ROUNDS_TOGETHER: usize = 3;
 
 fn whole_image() -> TileGrid {
     TileGrid::WHOLE
@@ -227,21 +240,69 @@ pub fn dataset_descriptors(
     config: &ExtractConfig,
     grid: TileGrid,
 ) -> anyhow::Result<(DescriptorSet, DescriptorSet)> {
-    let map = descriptors(
-        &cache.join("map.bowdesc"),
-        &dataset.map,
-        config,
-        TileGrid::WHOLE,
-        "extracting map",
-    )?;
+    let map = map_descriptors(cache, dataset, config)?;
     let queries = descriptors(
-        &cache.join(format!("queries-{grid}.bowdesc")),
+        &query_path(cache, grid),
         &dataset.queries,
         config,
         grid,
         "extracting queries",
     )?;
     Ok((map, queries))
+}
+
+/// A dataset's map descriptors (whole images), from the cache folder `cache`
+/// or extracted into it.
+pub fn map_descriptors(
+    cache: &Path,
+    dataset: &crate::dataset::Dataset,
+    config: &ExtractConfig,
+) -> anyhow::Result<DescriptorSet> {
+    descriptors(
+        &cache.join("map.bowdesc"),
+        &dataset.map,
+        config,
+        TileGrid::WHOLE,
+        "extracting map",
+    )
+}
+
+/// The cache file of a dataset's queries cut by `grid`.
+fn query_path(cache: &Path, grid: TileGrid) -> PathBuf {
+    cache.join(format!("queries-{grid}.bowdesc"))
+}
+
+/// A dataset's queries tile by tile with `grid` and, when `grid` cuts them,
+/// extracted whole too, the two timed back to back image by image
+/// ([`descriptors_together`]) so that their ratio is the tiles' own cost.
+pub fn query_descriptors_with_whole(
+    cache: &Path,
+    dataset: &crate::dataset::Dataset,
+    config: &ExtractConfig,
+    grid: TileGrid,
+) -> anyhow::Result<(DescriptorSet, Option<DescriptorSet>)> {
+    if grid == TileGrid::WHOLE {
+        let queries = descriptors(
+            &query_path(cache, grid),
+            &dataset.queries,
+            config,
+            grid,
+            "extracting queries",
+        )?;
+        return Ok((queries, None));
+    }
+    let mut sets = descriptors_together(
+        &[
+            (query_path(cache, grid), grid),
+            (query_path(cache, TileGrid::WHOLE), TileGrid::WHOLE),
+        ],
+        &dataset.queries,
+        config,
+        "extracting queries tiled and whole",
+    )?;
+    let whole = sets.pop();
+    let tiled = sets.pop().expect("two sets");
+    Ok((tiled, whole))
 }
 
 /// The descriptors of `images` extracted with `config`, tile by tile with
@@ -254,38 +315,108 @@ pub fn descriptors(
     grid: TileGrid,
     what: &str,
 ) -> anyhow::Result<DescriptorSet> {
+    let mut sets = descriptors_together(&[(path.to_owned(), grid)], images, config, what)?;
+    Ok(sets.pop().expect("one set"))
+}
+
+/// The descriptors of `images` extracted with `config` once per grid of
+/// `files`, each into its path. When every file holds exactly those
+/// (images, settings, grid) and, for more than one grid, was extracted
+/// together with the others, the files are served; otherwise all of them
+/// are extracted again together: each image decoded once and cut by every
+/// grid back to back, the cheapest of [`ROUNDS_TOGETHER`] rounds kept, so
+/// the files' times compare image by image.
+pub fn descriptors_together(
+    files: &[(PathBuf, TileGrid)],
+    images: &[ImageRef],
+    config: &ExtractConfig,
+    what: &str,
+) -> anyhow::Result<Vec<DescriptorSet>> {
     let stamps = stamps(images)?;
-    if path.exists() {
-        match open(path) {
-            Ok(set)
-                if set.meta.extract == *config
-                    && set.meta.images == stamps
-                    && set.meta.grid == grid =>
-            {
-                tracing::info!(path = %path.display(), images = set.len(), "descriptors from cache");
-                return Ok(set);
+    let others = |grid: TileGrid| -> Vec<TileGrid> {
+        files.iter().map(|f| f.1).filter(|&g| g != grid).collect()
+    };
+    let cached: Vec<Option<DescriptorSet>> = files
+        .iter()
+        .map(|(path, grid)| {
+            if !path.exists() {
+                return None;
             }
-            Ok(_) => {
-                tracing::info!(path = %path.display(), "cache made from other images or settings: re-extracting")
+            match open(path) {
+                Ok(set)
+                    if set.meta.extract == *config
+                        && set.meta.images == stamps
+                        && set.meta.grid == *grid
+                        && others(*grid)
+                            .iter()
+                            .all(|g| set.meta.timed_with.contains(g)) =>
+                {
+                    Some(set)
+                }
+                Ok(_) => {
+                    tracing::info!(path = %path.display(), "cache made from other images, settings or timings: re-extracting");
+                    None
+                }
+                Err(e) => {
+                    tracing::warn!("unusable cache, re-extracting: {e:#}");
+                    None
+                }
             }
-            Err(e) => tracing::warn!("unusable cache, re-extracting: {e:#}"),
+        })
+        .collect();
+    if cached.iter().all(Option::is_some) {
+        let sets: Vec<DescriptorSet> = cached.into_iter().flatten().collect();
+        for s in &sets {
+            tracing::info!(images = s.len(), grid = %s.meta.grid, "descriptors from cache");
         }
+        return Ok(sets);
     }
-    let extracted = extract_all_timed(images, config, grid, DecodeLimits::default(), false, what)?;
+    let grids: Vec<TileGrid> = files.iter().map(|f| f.1).collect();
+    let rounds = if grids.len() > 1 { ROUNDS_TOGETHER } else { 1 };
+    let extracted = extract_all_together(
+        images,
+        config,
+        &grids,
+        rounds,
+        DecodeLimits::default(),
+        false,
+        what,
+    )?;
+    files
+        .iter()
+        .enumerate()
+        .map(|(g, (path, grid))| {
+            let mut meta = DescriptorMeta {
+                extract: config.clone(),
+                images: stamps.clone(),
+                readable: Vec::with_capacity(images.len()),
+                decode_ms: Vec::with_capacity(images.len()),
+                extract_ms: Vec::with_capacity(images.len()),
+                grid: *grid,
+                tiles: Vec::with_capacity(images.len()),
+                timed_with: others(*grid),
+            };
+            let each: Vec<Option<&Extracted>> = extracted
+                .iter()
+                .map(|e| e.as_ref().map(|e| &e[g]))
+                .collect();
+            write_set(path, &mut meta, &each)
+        })
+        .collect()
+}
+
+/// Write one grid's extractions of an image list (`None`: unreadable) as a
+/// descriptor file at `path`, `meta` filled in image by image, and open it.
+fn write_set(
+    path: &Path,
+    meta: &mut DescriptorMeta,
+    extracted: &[Option<&Extracted>],
+) -> anyhow::Result<DescriptorSet> {
     let mut data: Vec<f32> = Vec::new();
     let mut keypoints: Vec<f32> = Vec::new();
     let mut offsets = vec![0u64];
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
-    let mut meta = DescriptorMeta {
-        extract: config.clone(),
-        images: stamps,
-        readable: Vec::with_capacity(images.len()),
-        decode_ms: Vec::with_capacity(images.len()),
-        extract_ms: Vec::with_capacity(images.len()),
-        grid,
-        tiles: Vec::with_capacity(images.len()),
-    };
-    for e in &extracted {
+    for e in extracted {
         if let Some(e) = e {
             anyhow::ensure!(
                 e.features.descriptors.ncols() == DIM,
@@ -301,11 +432,9 @@ pub fn descriptors(
         }
         offsets.push((data.len() / DIM) as u64);
         meta.readable.push(e.is_some());
-        meta.decode_ms
-            .push(e.as_ref().map_or(0.0, |e| ms(e.decode)));
-        meta.extract_ms
-            .push(e.as_ref().map_or(0.0, |e| ms(e.extract)));
-        meta.tiles.push(e.as_ref().map_or_else(Vec::new, |e| {
+        meta.decode_ms.push(e.map_or(0.0, |e| ms(e.decode)));
+        meta.extract_ms.push(e.map_or(0.0, |e| ms(e.extract)));
+        meta.tiles.push(e.map_or_else(Vec::new, |e| {
             e.tiles
                 .iter()
                 .map(|t| Tile {
@@ -319,7 +448,7 @@ pub fn descriptors(
         }));
     }
     StoreWriter::new(MAGIC, VERSION)
-        .json("meta", &meta)
+        .json("meta", &*meta)
         .f32s("descriptors", &data)
         .f32s("keypoints", &keypoints)
         .u64s("offsets", &offsets)
@@ -497,6 +626,7 @@ mod tests {
             decode_ms: vec![1.0, 2.0],
             extract_ms: vec![3.0, 4.0],
             grid: TileGrid::WHOLE,
+            timed_with: Vec::new(),
             tiles: vec![
                 vec![Tile {
                     features: 1,
@@ -567,6 +697,7 @@ mod tests {
             decode_ms: vec![0.0],
             extract_ms: vec![0.0],
             grid: TileGrid::WHOLE,
+            timed_with: Vec::new(),
             tiles: vec![vec![Tile {
                 features: 1,
                 area: 1.0,
@@ -606,6 +737,36 @@ mod tests {
             ..ExtractConfig::default()
         };
         assert!(descriptors(&path, &images, &other, TileGrid::WHOLE, "t").is_err());
+        // Asked for together with the whole image: a file not extracted
+        // with it is re-extracted, one that was is served, alone or paired.
+        let tiled = dir.path().join("t.bowdesc");
+        let files = [(tiled.clone(), grid), (path.clone(), TileGrid::WHOLE)];
+        let config = ExtractConfig::default();
+        let write_grid = |at: &Path, grid: TileGrid, with: Vec<TileGrid>| {
+            let meta = DescriptorMeta {
+                grid,
+                timed_with: with,
+                ..meta.clone()
+            };
+            StoreWriter::new(MAGIC, VERSION)
+                .json("meta", &meta)
+                .f32s("descriptors", &data)
+                .f32s("keypoints", &[0.5; KEYPOINT_WIDTH])
+                .u64s("offsets", &[0, 1])
+                .write_atomic(at)
+                .unwrap();
+        };
+        write_grid(&tiled, grid, vec![]);
+        write_grid(&path, TileGrid::WHOLE, vec![]);
+        assert!(descriptors_together(&files, &images, &config, "t").is_err());
+        write_grid(&tiled, grid, vec![TileGrid::WHOLE]);
+        write_grid(&path, TileGrid::WHOLE, vec![grid]);
+        let sets = descriptors_together(&files, &images, &config, "t").unwrap();
+        assert_eq!(
+            sets.iter().map(|s| s.meta().grid).collect::<Vec<_>>(),
+            [grid, TileGrid::WHOLE]
+        );
+        assert!(descriptors(&tiled, &images, &config, grid, "t").is_ok());
         // Same settings but the image changed size: re-extracted too.
         std::fs::write(dir.path().join("x.jpg"), b"still not an image").unwrap();
         assert!(

@@ -459,21 +459,9 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         .as_ref()
         .map_or(config.extract.clone(), |v| v.meta().extract.clone());
 
-    let (map_desc, query_desc) =
-        cache::dataset_descriptors(&config.cache, &dataset, &extract, config.tiles)?;
-    let whole_desc = (config.tiles != TileGrid::WHOLE)
-        .then(|| {
-            cache::descriptors(
-                &config
-                    .cache
-                    .join(format!("queries-{}.bowdesc", TileGrid::WHOLE)),
-                &dataset.queries,
-                &extract,
-                TileGrid::WHOLE,
-                "extracting whole queries",
-            )
-        })
-        .transpose()?;
+    let map_desc = cache::map_descriptors(&config.cache, &dataset, &extract)?;
+    let (query_desc, whole_desc) =
+        cache::query_descriptors_with_whole(&config.cache, &dataset, &extract, config.tiles)?;
     if config.tiles.coarse {
         let (coarse, all) = query_desc
             .meta()

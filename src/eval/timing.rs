@@ -89,6 +89,11 @@ pub fn quantiles(values: &[f64]) -> Quantiles {
     }
 }
 
+/// The median of `values` (nearest rank; 0 when empty).
+pub fn median(values: &[f64]) -> f64 {
+    quantiles(values).median
+}
+
 /// One query's stage times in one run, in milliseconds.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct StageSample {
