@@ -61,14 +61,3 @@ fn set_thresholds() -> bool {
 fn set_thresholds() -> bool {
     false
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[cfg(target_env = "gnu")]
-    #[test]
-    fn glibc_takes_both_thresholds() {
-        assert!(set_thresholds());
-    }
-}
