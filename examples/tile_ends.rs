@@ -37,14 +37,16 @@ fn main() -> anyhow::Result<()> {
         Some(g) => g.parse().map_err(anyhow::Error::msg)?,
         None => TileGrid::DEFAULT,
     };
-    let whole = cache::prepare_from_args(&args, TileGrid::WHOLE)?;
     let cache::Prepared {
         dataset,
         queries,
+        whole_queries,
         vocab,
         map,
         ..
     } = cache::prepare_from_args(&args, grid)?;
+    // extracted with the tiles, image by image, so their times compare
+    let whole = whole_queries.as_ref().unwrap_or(&queries);
     let window = SearchOptions::PLACE_WINDOW;
     let context = RuleContext {
         place_window: window,
@@ -74,7 +76,7 @@ fn main() -> anyhow::Result<()> {
         };
         let coded = code(&vocab, descriptors);
         let query = queries.query(q, coded.words.clone(), coded.signatures.clone());
-        let whole_ms = whole.queries.extract_ms(q);
+        let whole_ms = whole.extract_ms(q);
         for run in 0..RUNS {
             let (order, spans) = query.tile_order(seed(run, q), TileOrder::Richest);
             let mut voter =

@@ -465,6 +465,9 @@ pub struct Prepared {
     pub map_descriptors: DescriptorSet,
     /// The queries, tile by tile with the grid asked for.
     pub queries: DescriptorSet,
+    /// The queries extracted whole, timed with `queries` image by image
+    /// (`None` when the grid asked for is the whole image).
+    pub whole_queries: Option<DescriptorSet>,
     pub vocab: Vocabulary,
     pub map: MapIndex,
 }
@@ -507,8 +510,9 @@ pub fn prepare(root: &Path, words: usize, seed: u64, grid: TileGrid) -> anyhow::
     let dataset = crate::dataset::Dataset::open(root)?;
     let dir = Path::new("data/eval-cache").join(&dataset.name);
     std::fs::create_dir_all(&dir)?;
-    let (map_descriptors, queries) =
-        dataset_descriptors(&dir, &dataset, &ExtractConfig::default(), grid)?;
+    let config = ExtractConfig::default();
+    let map_descriptors = map_descriptors(&dir, &dataset, &config)?;
+    let (queries, whole_queries) = query_descriptors_with_whole(&dir, &dataset, &config, grid)?;
     let kmeans = KmeansConfig {
         k: words,
         seed,
@@ -520,6 +524,7 @@ pub fn prepare(root: &Path, words: usize, seed: u64, grid: TileGrid) -> anyhow::
         dataset,
         map_descriptors,
         queries,
+        whole_queries,
         vocab,
         map,
     })
