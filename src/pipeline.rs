@@ -684,7 +684,11 @@ impl Localizer {
             let Some(tile) = tiles.next_tile() else { break };
             let tile = tile?;
             let took = t.elapsed();
-            let last = tiles.extracted() == tiles.total();
+            let step = search::TileStep {
+                share: tiles.share_extracted(),
+                last: tiles.extracted() == tiles.total(),
+                coarse: grid.coarse && tiles.extracted() == 1,
+            };
             if let Some(full) = &mut full {
                 let quantize = search::descriptor_quantizer(
                     &*quantizer,
@@ -692,7 +696,7 @@ impl Localizer {
                     tile.descriptors.view(),
                     options.block,
                 );
-                full.feed_tile(tile.len(), tiles.share_extracted(), last, quantize, None);
+                full.feed_tile(tile.len(), step, quantize, None);
             }
             if search.stopped() {
                 continue;
@@ -713,13 +717,7 @@ impl Localizer {
                 keypoints: &keypoints,
                 place_window: options.place_window,
             };
-            search.feed_tile(
-                tile.len(),
-                tiles.share_extracted(),
-                last,
-                quantize,
-                Some(&mut check),
-            );
+            search.feed_tile(tile.len(), step, quantize, Some(&mut check));
         }
         let extraction = Extraction {
             tiles_extracted: tiles_used,

@@ -275,6 +275,8 @@ fn query_path(cache: &Path, grid: TileGrid) -> PathBuf {
 /// A dataset's queries tile by tile with `grid` and, when `grid` cuts them,
 /// extracted whole too, the two timed back to back image by image
 /// ([`descriptors_together`]) so that their ratio is the tiles' own cost.
+/// The whole queries go to a file of their own per grid, so that grids
+/// evaluated in turn do not extract each other's again.
 pub fn query_descriptors_with_whole(
     cache: &Path,
     dataset: &crate::dataset::Dataset,
@@ -294,7 +296,10 @@ pub fn query_descriptors_with_whole(
     let mut sets = descriptors_together(
         &[
             (query_path(cache, grid), grid),
-            (query_path(cache, TileGrid::WHOLE), TileGrid::WHOLE),
+            (
+                cache.join(format!("queries-{}-with-{grid}.bowdesc", TileGrid::WHOLE)),
+                TileGrid::WHOLE,
+            ),
         ],
         &dataset.queries,
         config,

@@ -176,6 +176,7 @@ impl Query {
             map,
             &batches,
             options,
+            self.coarse_first,
             check.as_mut().map(|c| c as &mut dyn search::LeaderCheck),
         );
         let mut verify_ms = check.map_or(0.0, |c| c.spent.as_secs_f64() * 1e3);

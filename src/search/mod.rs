@@ -261,6 +261,9 @@ pub struct Search<'m> {
     /// Whether the query comes in more than one tile and a stop inside one
     /// finishes it ([`SearchOptions::finish_tile`]).
     streamed: bool,
+    /// Whether the batch being voted is a coarse pass, where only a
+    /// geometric check may stop ([`StopRule::check_on_coarse`]).
+    coarse_batch: bool,
     batches: u64,
     fed: usize,
     /// Every feature voted, in voting order.
@@ -289,6 +292,7 @@ impl<'m> Search<'m> {
             stop: None,
             finishing: None,
             streamed: false,
+            coarse_batch: false,
             batches: 0,
             fed: 0,
             voted: Vec::new(),
@@ -397,9 +401,13 @@ impl<'m> Search<'m> {
                         .filter(|_| block_end)
                         .map(|c| &mut **c as &mut dyn LeaderCheck);
                     let started = block_end.then(Instant::now);
-                    let why = self
-                        .rule
-                        .check_with(&self.voter, &self.voted, check, at_end);
+                    let why = if self.coarse_batch {
+                        self.rule
+                            .check_on_coarse(&self.voter, &self.voted, check, at_end)
+                    } else {
+                        self.rule
+                            .check_with(&self.voter, &self.voted, check, at_end)
+                    };
                     if let Some(started) = started {
                         checking += started.elapsed();
                     }
@@ -433,29 +441,33 @@ impl<'m> Search<'m> {
     }
 
     /// Feed the features of one tile of a streamed image: `count` features,
-    /// after which `share` of the image (by area, in (0, 1]) has been
-    /// extracted; `last` when no tile is left, so N becomes known. N is
+    /// after which `step.share` of the image (by area, in (0, 1]) has been
+    /// extracted; `step.last` when no tile is left, so N becomes known. N is
     /// estimated meanwhile as the features so far over the share extracted.
     /// With [`SearchOptions::finish_tile`], when the rule stops the search
     /// inside a tile of an image that comes in several, the tile's other
-    /// features are voted before it ends.
+    /// features are voted before it ends. On a coarse pass
+    /// (`step.coarse`) only the rule's geometric check may stop the search
+    /// ([`StopRule::check_on_coarse`]).
     /// Returns whether the search has stopped.
     pub fn feed_tile(
         &mut self,
         count: usize,
-        share: f64,
-        last: bool,
+        step: TileStep,
         quantize: impl FnMut(&[u32], &mut [u32], &mut [u64]),
         leader_check: Option<&mut dyn LeaderCheck>,
     ) -> bool {
         let fed = self.fed + count;
-        self.streamed |= !last && self.options.finish_tile;
-        if last {
+        self.streamed |= !step.last && self.options.finish_tile;
+        if step.last {
             self.set_total(fed);
         } else {
-            self.set_expected_total(fed as f64 / share.max(1e-9));
+            self.set_expected_total(fed as f64 / step.share.max(1e-9));
         }
-        self.feed_checked(count, quantize, leader_check)
+        self.coarse_batch = step.coarse && !step.last;
+        let stopped = self.feed_checked(count, quantize, leader_check);
+        self.coarse_batch = false;
+        stopped
     }
 
     /// Rank the candidates and say why the search ended.
@@ -598,6 +610,17 @@ impl CodedFeatures {
     }
 }
 
+/// Where one tile of a streamed image leaves the search ([`Search::feed_tile`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TileStep {
+    /// Share of the image (by area, in (0, 1]) extracted with this tile.
+    pub share: f64,
+    /// No tile is left: N is known.
+    pub last: bool,
+    /// The tile is a coarse pass (the whole frame at half size).
+    pub coarse: bool,
+}
+
 /// Why a search stopped at the end of the tile its rule fired in.
 fn tile_finished(why: String) -> String {
     format!("{why} (then the rest of the tile voted)")
@@ -605,13 +628,15 @@ fn tile_finished(why: String) -> String {
 
 /// Stream an image's tiles through a search, tiles given as their features
 /// (known in advance) in extraction order with the image share each one
-/// covers: what the service does with real tiles (used by evaluation).
+/// covers, the first a coarse pass when `coarse_first`: what the service
+/// does with real tiles (used by evaluation).
 /// Returns the outcome, the (feature number, word) pairs voted and the tiles
 /// extracted.
 pub fn search_tiles(
     map: &dyn MapRead,
     tiles: &[(KnownFeatures<'_>, f64)],
     options: &SearchOptions,
+    coarse_first: bool,
     mut leader_check: Option<&mut dyn LeaderCheck>,
 ) -> (SearchOutcome, Vec<Voted>, usize) {
     let mut s = Search::new(map, options);
@@ -620,11 +645,15 @@ pub fn search_tiles(
     for (k, (features, area)) in tiles.iter().enumerate() {
         share += area;
         used += 1;
-        let last = k + 1 == tiles.len();
+        let step = TileStep {
+            share,
+            last: k + 1 == tiles.len(),
+            coarse: coarse_first && k == 0,
+        };
         let check = leader_check
             .as_mut()
             .map(|c| &mut **c as &mut dyn LeaderCheck);
-        if s.feed_tile(features.len(), share, last, features.lookup(), check) {
+        if s.feed_tile(features.len(), step, features.lookup(), check) {
             break;
         }
     }

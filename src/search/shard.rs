@@ -492,7 +492,7 @@ mod tests {
                             hamming: None,
                             ..SearchOptions::default()
                         };
-                        let (one, _, _) = one_machine(&map, &tiles, &options, None);
+                        let (one, _, _) = one_machine(&map, &tiles, &options, false, None);
                         let s = search_tiles(&sharded, &tiles, &options);
                         let o = &s.outcome;
                         assert_eq!(o.candidates, one.candidates, "{rule} on {count} shards");

@@ -292,7 +292,12 @@ fn traces_record_the_race_without_changing_it() {
                     signed.fill(0);
                 };
                 let share = (k + 1) as f64 / tiles.len() as f64;
-                if s.feed_tile(words.len(), share, k + 1 == tiles.len(), quantize, None) {
+                let step = TileStep {
+                    share,
+                    last: k + 1 == tiles.len(),
+                    coarse: false,
+                };
+                if s.feed_tile(words.len(), step, quantize, None) {
                     break;
                 }
             }
@@ -391,14 +396,19 @@ fn a_stop_inside_a_tile_votes_the_rest_of_the_tile() {
     };
     // whole: one batch, it stops where the rule fires
     let mut whole = Search::new(&map, &o);
-    assert!(whole.feed_tile(900, 1.0, true, quantize_from(&query), None));
+    let step = |share: f64, last: bool| TileStep {
+        share,
+        last,
+        coarse: false,
+    };
+    assert!(whole.feed_tile(900, step(1.0, true), quantize_from(&query), None));
     let whole = whole.finish();
     assert_eq!(whole.stop.kind, StopKind::Rule);
     assert!(whole.stop.at_feature < 100, "{:?}", whole.stop);
     // three tiles: it fires inside the first and the first's 300 are voted
     let mut streamed = Search::new(&map, &o);
     let tiles: Vec<&[u32]> = query.chunks(300).collect();
-    assert!(streamed.feed_tile(300, 1.0 / 3.0, false, quantize_from(tiles[0]), None));
+    assert!(streamed.feed_tile(300, step(1.0 / 3.0, false), quantize_from(tiles[0]), None));
     let streamed = streamed.finish();
     assert_eq!(streamed.stop.kind, StopKind::Rule);
     assert_eq!(streamed.stop.at_feature, 300);
@@ -413,8 +423,20 @@ fn a_stop_inside_a_tile_votes_the_rest_of_the_tile() {
         ..o.clone()
     };
     let mut unfinished = Search::new(&map, &plain);
-    assert!(unfinished.feed_tile(300, 1.0 / 3.0, false, quantize_from(tiles[0]), None));
+    assert!(unfinished.feed_tile(300, step(1.0 / 3.0, false), quantize_from(tiles[0]), None));
     let unfinished = unfinished.finish();
     assert_eq!(unfinished.stop.kind, StopKind::Rule);
     assert!(unfinished.stop.at_feature < 100, "{:?}", unfinished.stop);
+    // the same first tile as a coarse pass: the vote rule does not stop
+    // there, and fires on the next tile's first features
+    let mut coarse = Search::new(&map, &o);
+    let first = TileStep {
+        coarse: true,
+        ..step(1.0 / 3.0, false)
+    };
+    assert!(!coarse.feed_tile(300, first, quantize_from(tiles[0]), None));
+    assert!(coarse.feed_tile(300, step(2.0 / 3.0, false), quantize_from(tiles[1]), None));
+    let coarse = coarse.finish();
+    assert_eq!(coarse.stop.kind, StopKind::Rule);
+    assert_eq!(coarse.stop.at_feature, 600);
 }

@@ -56,6 +56,22 @@ pub trait StopRule: Send {
         let _ = (voted, leader_check, batch_end);
         self.check(voter)
     }
+
+    /// [`check_with`](Self::check_with) on the coarse pass of a streamed
+    /// query (the whole frame at half size, extracted first). Its features
+    /// are the image's coarser scales, not a random sample of the image, so
+    /// a vote statistic on them claims more than it knows: a vote rule does
+    /// not stop there (the default), only a geometric check may.
+    fn check_on_coarse(
+        &mut self,
+        voter: &dyn VoteStats,
+        voted: &[Voted],
+        leader_check: Option<&mut dyn LeaderCheck>,
+        batch_end: bool,
+    ) -> Option<String> {
+        let _ = (voter, voted, leader_check, batch_end);
+        None
+    }
 }
 
 /// A geometric check against the query features voted so far. Implemented

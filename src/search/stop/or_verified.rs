@@ -73,6 +73,18 @@ impl StopRule for OrVerified {
         if let Some(why) = self.votes.check(voter) {
             return Some(why);
         }
+        self.check_on_coarse(voter, voted, leader_check, batch_end)
+    }
+
+    /// The geometric check alone: the vote rule does not stop a search on
+    /// a coarse pass.
+    fn check_on_coarse(
+        &mut self,
+        voter: &dyn VoteStats,
+        voted: &[Voted],
+        leader_check: Option<&mut dyn LeaderCheck>,
+        batch_end: bool,
+    ) -> Option<String> {
         // a tile's end with tiles left: N is not known yet
         if !batch_end || voter.tally().total.is_some() {
             return None;

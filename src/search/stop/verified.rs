@@ -87,6 +87,17 @@ impl StopRule for Verified {
         })
     }
 
+    /// A geometric rule: the coarse pass is checked as any tile.
+    fn check_on_coarse(
+        &mut self,
+        voter: &dyn VoteStats,
+        voted: &[Voted],
+        leader_check: Option<&mut dyn LeaderCheck>,
+        batch_end: bool,
+    ) -> Option<String> {
+        self.check_with(voter, voted, leader_check, batch_end)
+    }
+
     /// The inliers of the last check, against m.
     fn statistic(&self, _: &dyn VoteStats) -> Option<(f64, f64)> {
         self.inliers.map(|i| (i as f64, self.min_inliers as f64))
