@@ -609,7 +609,11 @@ impl Localizer {
             && rule.info().stops_early
         {
             let t = &answer.timings_ms;
-            choice.record(answer.tiles.grid.coarse, t.total - t.decode);
+            choice.record(
+                answer.tiles.grid.coarse,
+                t.total - t.decode,
+                answer.tiles.extracted <= 1,
+            );
         }
     }
 

@@ -327,7 +327,7 @@ impl Default for SearchDefaults {
             tree_probes: 16,
             tiles: crate::features::TilePlan {
                 grid: crate::features::TileGrid::DEFAULT,
-                learn_coarse: false,
+                learn_coarse: true,
             }
             .to_string(),
             tile_order: o.tile_order,
