@@ -196,7 +196,11 @@ mod tests {
             coarse_used += coarse as usize;
             let (ms, ended) = if coarse {
                 n += 1;
-                if n % 4 == 0 { (10.0, true) } else { (30.0, false) }
+                if n % 4 == 0 {
+                    (10.0, true)
+                } else {
+                    (30.0, false)
+                }
             } else {
                 (35.0, false)
             };
@@ -204,10 +208,17 @@ mod tests {
         }
         let (plain, coarse) = c.arms();
         assert!(coarse.typical_ms() < plain.typical_ms());
-        assert!((coarse.ended_first - 0.25).abs() < 0.1, "{}", coarse.ended_first);
+        assert!(
+            (coarse.ended_first - 0.25).abs() < 0.1,
+            "{}",
+            coarse.ended_first
+        );
         assert_eq!(c.preferred(), Some(false));
         // the trials, then one request in EXPLORE_EVERY
-        assert!(coarse_used <= CoarseChoice::TRIAL as usize + 400 / CoarseChoice::EXPLORE_EVERY as usize);
+        assert!(
+            coarse_used
+                <= CoarseChoice::TRIAL as usize + 400 / CoarseChoice::EXPLORE_EVERY as usize
+        );
     }
 
     #[test]
