@@ -185,12 +185,13 @@ check "rule fixed 0.5 uses half the features" jqt --arg s "$status" '
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=hoeffding&delta=0.1&min_score=1000")
 check "min_score drops every candidate" test "$status/$(jq '.candidates | length' "$B")" = "200/0"
 # min_distinct keeps, of the same answer, the candidates at least that
-# distinct, ranked again from 1 (with and without verification)
+# distinct, ranked again from 1 (with and without verification; the grid
+# named, so the learned plan cannot answer the two requests differently)
 for v in false true; do
-  req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?top_n=10&seed=7&verify=$v" >/dev/null
+  req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?top_n=10&seed=7&verify=$v&tiles=2x2%2B24" >/dev/null
   cp "$B" "$TMP/all.json"
   cut=$(jq '[.candidates[].distinct] | sort | .[length / 2 | floor]' "$TMP/all.json")
-  status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?top_n=10&seed=7&verify=$v&min_distinct=$cut")
+  status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?top_n=10&seed=7&verify=$v&tiles=2x2%2B24&min_distinct=$cut")
   check "min_distinct=$cut (verify=$v) keeps the candidates that distinct, ranked from 1" test \
     "$status/$(jq -c '[.candidates[] | [.rank, .id]]' "$B")" = \
     "200/$(jq -c --argjson cut "$cut" '[.candidates[] | select(.distinct >= $cut)] | to_entries | map([.key + 1, .value.id])' "$TMP/all.json")"
