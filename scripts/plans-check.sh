@@ -11,7 +11,8 @@
 #
 # The environment changes what is compared: SETTINGS (RULE=VALUE@WARMUP
 # settings besides the full search; default "peak-mean=1.6@20 verified=8"),
-# VERIFY (yes or no; default yes), PLANS (default "2x2+24 2x2+24,coarse"),
+# VERIFY (yes or no; default yes), PLANS (default "2x2+24 2x2+24,coarse";
+# "2x2+24,auto" replays the service's learned choice between them),
 # ORDERS (tile orders, default "richest"; "richest random" compares them)
 # and DATASETS (NAME:WORDS, default "rtabmap-loop:1000 gardens-point:5000").
 set -euo pipefail
@@ -48,7 +49,8 @@ for r in rows:
           f"(worst {pct('recall1_worst'):.1f}), recall@5 {pct('recall5_mean'):.1f}, "
           f"top-1 @90%P by distinctness {pct('recall90_top1_distinct_mean'):.1f}, "
           f"features {pct('fraction_mean'):.1f} %, x whole-image full search "
-          f"{float(r['time_share_whole_full_mean']):.3f} / {float(r['time_share_whole_full_median']):.3f}")
+          f"{float(r['time_share_whole_full_mean']):.3f} / {float(r['time_share_whole_full_median']):.3f}"
+          + (f", started coarse {pct('coarse_first_mean'):.1f} %" if r.get('coarse_first_mean') and float(r['coarse_first_mean']) > 0 else ""))
 PY
   done
   done

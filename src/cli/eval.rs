@@ -4,7 +4,7 @@
 use super::args::{ExtractArgs, SequenceArgs, VerifyArgs, dataset_name, place_window, vocab_seeds};
 use bowloc::eval::machine::OpenCvInfo;
 use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig, Warmup};
-use bowloc::features::TileGrid;
+use bowloc::features::TilePlan;
 use bowloc::search::SearchOptions;
 use clap::Args;
 use std::path::PathBuf;
@@ -58,10 +58,12 @@ pub struct EvalArgs {
     #[arg(long)]
     no_plots: bool,
     /// The queries' tile grid for streaming extraction,
-    /// COLSxROWS[+MARGIN][,coarse] (1x1: whole images; `,coarse`: a half-size
-    /// pass first). The full search also runs on whole queries.
+    /// COLSxROWS[+MARGIN][,coarse|,auto] (1x1: whole images; `,coarse`: a
+    /// half-size pass first; `,auto`: the coarse pass learned per request as
+    /// the service learns it, replayed over the queries in order for each
+    /// setting and run). The full search also runs on whole queries.
     #[arg(long, default_value = "2x2+24")]
-    tiles: TileGrid,
+    tiles: TilePlan,
     /// The order the tiles are replayed in, as the service extracts them.
     #[arg(long, default_value_t = bowloc::search::TileOrder::default(), value_parser = super::args::tile_order_parser())]
     tile_order: bowloc::search::TileOrder,
@@ -192,12 +194,19 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
 fn sequence(a: EvalArgs, name: String, seeds: Vec<u64>) -> anyhow::Result<()> {
     let stop = eval::sweep::parse_setting(&a.stop, 0)
         .map_err(|e| anyhow::anyhow!("--stop {}: {e}", a.stop))?;
+    anyhow::ensure!(
+        !a.tiles.learn_coarse,
+        "--sequence replays one grid: --tiles {} learns the coarse pass, give {} or {},coarse",
+        a.tiles,
+        a.tiles.grid,
+        a.tiles.grid
+    );
     let config = eval::sequence::SequenceEvalConfig {
         words: a.words,
         seeds,
         runs: a.runs,
         extract: a.extract.config(),
-        tiles: a.tiles,
+        tiles: a.tiles.grid,
         out: a.out.unwrap_or_else(|| {
             PathBuf::from("data/eval").join(format!("{name}-k{}-sequence", a.words))
         }),

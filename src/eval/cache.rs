@@ -17,7 +17,7 @@
 
 use super::tiles::{Query, Tile};
 use crate::dataset::ImageRef;
-use crate::features::{DecodeLimits, ExtractConfig, Features, TileGrid};
+use crate::features::{DecodeLimits, ExtractConfig, Features, TileGrid, TilePlan};
 use crate::geometry::Keypoint;
 use crate::index::MapIndex;
 use crate::pipeline::{Extracted, extract_all_together, index_descriptors, train_vocabulary};
@@ -241,14 +241,23 @@ pub fn dataset_descriptors(
     grid: TileGrid,
 ) -> anyhow::Result<(DescriptorSet, DescriptorSet)> {
     let map = map_descriptors(cache, dataset, config)?;
-    let queries = descriptors(
+    Ok((map, queries_alone(cache, dataset, config, grid)?))
+}
+
+/// A dataset's queries tile by tile with `grid`, timed on their own.
+fn queries_alone(
+    cache: &Path,
+    dataset: &crate::dataset::Dataset,
+    config: &ExtractConfig,
+    grid: TileGrid,
+) -> anyhow::Result<DescriptorSet> {
+    descriptors(
         &query_path(cache, grid),
         &dataset.queries,
         config,
         grid,
         "extracting queries",
-    )?;
-    Ok((map, queries))
+    )
 }
 
 /// A dataset's map descriptors (whole images), from the cache folder `cache`
@@ -272,42 +281,47 @@ fn query_path(cache: &Path, grid: TileGrid) -> PathBuf {
     cache.join(format!("queries-{grid}.bowdesc"))
 }
 
-/// A dataset's queries tile by tile with `grid` and, when `grid` cuts them,
-/// extracted whole too, the two timed back to back image by image
-/// ([`descriptors_together`]) so that their ratio is the tiles' own cost.
-/// The whole queries go to a file of their own per grid, so that grids
-/// evaluated in turn do not extract each other's again.
+/// A dataset's queries cut by each grid of `plan` ([`TilePlan::grids`]) and,
+/// when the plan cuts them, extracted whole too, all timed back to back
+/// image by image ([`descriptors_together`]) so that their ratios are the
+/// plans' own costs. The whole queries go to a file of their own per plan,
+/// so that plans evaluated in turn do not extract each other's again; a
+/// learned plan's grids do too, so that the two it compares were timed
+/// together.
 pub fn query_descriptors_with_whole(
     cache: &Path,
     dataset: &crate::dataset::Dataset,
     config: &ExtractConfig,
-    grid: TileGrid,
-) -> anyhow::Result<(DescriptorSet, Option<DescriptorSet>)> {
-    if grid == TileGrid::WHOLE {
-        let queries = descriptors(
-            &query_path(cache, grid),
-            &dataset.queries,
-            config,
-            grid,
-            "extracting queries",
-        )?;
-        return Ok((queries, None));
+    plan: TilePlan,
+) -> anyhow::Result<(Vec<DescriptorSet>, Option<DescriptorSet>)> {
+    if plan == TilePlan::from(TileGrid::WHOLE) {
+        let queries = queries_alone(cache, dataset, config, TileGrid::WHOLE)?;
+        return Ok((vec![queries], None));
     }
+    let mut files: Vec<(PathBuf, TileGrid)> = plan
+        .grids()
+        .into_iter()
+        .map(|grid| {
+            let path = if plan.learn_coarse {
+                cache.join(format!("queries-{grid}-in-{plan}.bowdesc"))
+            } else {
+                query_path(cache, grid)
+            };
+            (path, grid)
+        })
+        .collect();
+    files.push((
+        cache.join(format!("queries-{}-with-{plan}.bowdesc", TileGrid::WHOLE)),
+        TileGrid::WHOLE,
+    ));
     let mut sets = descriptors_together(
-        &[
-            (query_path(cache, grid), grid),
-            (
-                cache.join(format!("queries-{}-with-{grid}.bowdesc", TileGrid::WHOLE)),
-                TileGrid::WHOLE,
-            ),
-        ],
+        &files,
         &dataset.queries,
         config,
         "extracting queries tiled and whole",
     )?;
     let whole = sets.pop();
-    let tiled = sets.pop().expect("two sets");
-    Ok((tiled, whole))
+    Ok((sets, whole))
 }
 
 /// The descriptors of `images` extracted with `config`, tile by tile with
@@ -517,7 +531,9 @@ pub fn prepare(root: &Path, words: usize, seed: u64, grid: TileGrid) -> anyhow::
     std::fs::create_dir_all(&dir)?;
     let config = ExtractConfig::default();
     let map_descriptors = map_descriptors(&dir, &dataset, &config)?;
-    let (queries, whole_queries) = query_descriptors_with_whole(&dir, &dataset, &config, grid)?;
+    let (mut queries, whole_queries) =
+        query_descriptors_with_whole(&dir, &dataset, &config, grid.into())?;
+    let queries = queries.pop().expect("one grid");
     let kmeans = KmeansConfig {
         k: words,
         seed,

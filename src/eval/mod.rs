@@ -41,7 +41,7 @@ pub mod verify;
 
 use crate::calibrate::{auto_warmup, median_features};
 use crate::dataset::Dataset;
-use crate::features::{ExtractConfig, TileGrid};
+use crate::features::{ExtractConfig, TileGrid, TilePlan};
 use crate::index::MapIndex;
 use crate::pipeline::progress_bar;
 use crate::search::RuleSpec;
@@ -134,8 +134,10 @@ pub struct EvalConfig {
     pub extract: ExtractConfig,
     /// Streaming extraction's tile grid for the queries (the map images are
     /// extracted whole). The full search is also run on the queries
-    /// extracted whole, to show what tiling changes.
-    pub tiles: TileGrid,
+    /// extracted whole, to show what tiling changes. A learned coarse pass
+    /// (`,auto`) is replayed as the service learns it
+    /// ([`sweep::run_learned`]).
+    pub tiles: TilePlan,
     /// Use this vocabulary instead of training one (its extraction settings win).
     pub vocab: Option<PathBuf>,
     pub out: PathBuf,
@@ -460,10 +462,20 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         .map_or(config.extract.clone(), |v| v.meta().extract.clone());
 
     let map_desc = cache::map_descriptors(&config.cache, &dataset, &extract)?;
-    let (query_desc, whole_desc) =
+    let (mut query_sets, whole_desc) =
         cache::query_descriptors_with_whole(&config.cache, &dataset, &extract, config.tiles)?;
-    if config.tiles.coarse {
-        let (coarse, all) = query_desc
+    // a learned coarse pass: the grid without it, then with it
+    let coarse_desc = if config.tiles.learn_coarse {
+        query_sets.pop()
+    } else {
+        None
+    };
+    let query_desc = query_sets.pop().expect("the plan's grid");
+    if let Some(with_coarse) = coarse_desc
+        .as_ref()
+        .or_else(|| config.tiles.grid.coarse.then_some(&query_desc))
+    {
+        let (coarse, all) = with_coarse
             .meta()
             .tiles
             .iter()
@@ -518,17 +530,23 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         let (queries, costs) = quantize_queries(set, v, &what);
         SeedWords { queries, costs }
     };
-    let per_seed: Vec<SeedWords> = vocabs
-        .iter()
-        .zip(&seeds)
-        .map(|(v, s)| {
-            let mut words = quantize(&query_desc, v, format!("quantizing (seed {s})"));
-            for q in &mut words.queries {
-                q.geometry = Some(geometry.clone());
-            }
-            words
-        })
-        .collect();
+    let streamed = |set: &cache::DescriptorSet, what: &str| -> Vec<SeedWords> {
+        vocabs
+            .iter()
+            .zip(&seeds)
+            .map(|(v, s)| {
+                let mut words = quantize(set, v, format!("quantizing {what}(seed {s})"));
+                for q in &mut words.queries {
+                    q.geometry = Some(geometry.clone());
+                }
+                words
+            })
+            .collect()
+    };
+    let per_seed = streamed(&query_desc, "");
+    let per_seed_coarse = coarse_desc
+        .as_ref()
+        .map(|set| streamed(set, "with the coarse pass "));
     let whole: Option<Vec<SeedWords>> = whole_desc.as_ref().map(|d| {
         vocabs
             .iter()
@@ -602,17 +620,45 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         "sweeping"
     );
 
-    let bar = progress_bar((counts.len() * seeds.len()) as u64, "sweeping");
-    let outcomes: Vec<Vec<Vec<Vec<Outcome>>>> = maps
-        .iter()
-        .zip(&per_seed)
-        .map(|(map, q)| sweep::run_all(map, &q.queries, &settings, config.runs, ranking, &bar))
-        .collect();
-    bar.finish_and_clear();
+    let outcomes: Vec<Vec<Vec<Vec<Outcome>>>> = match &per_seed_coarse {
+        None => {
+            let bar = progress_bar((counts.len() * seeds.len()) as u64, "sweeping");
+            let o = maps
+                .iter()
+                .zip(&per_seed)
+                .map(|(map, q)| {
+                    sweep::run_all(map, &q.queries, &settings, config.runs, ranking, &bar)
+                })
+                .collect();
+            bar.finish_and_clear();
+            o
+        }
+        Some(coarse) => {
+            let bar = progress_bar(
+                (settings.len() * config.runs as usize * seeds.len()) as u64,
+                "sweeping, the coarse pass learned",
+            );
+            let o = maps
+                .iter()
+                .zip(per_seed.iter().zip(coarse))
+                .map(|(map, (plain, coarse))| {
+                    let plan = sweep::LearnedPlan {
+                        plain: (&plain.queries, &plain.costs),
+                        coarse: (&coarse.queries, &coarse.costs),
+                    };
+                    sweep::run_learned(map, plan, &settings, config.runs, ranking, &bar)
+                })
+                .collect();
+            bar.finish_and_clear();
+            o
+        }
+    };
+    // the grid's tiles, without the coarse pass (an outcome adds it when it
+    // started with it)
     let tiles_total: Vec<usize> = per_seed[0]
         .queries
         .iter()
-        .map(|q| q.tiles.len().max(1))
+        .map(|q| (q.tiles.len() - usize::from(q.coarse_first)).max(1))
         .collect();
     // the full search's request times, per seed: what time shares are of
     let full_ms: Vec<Vec<Vec<f64>>> = outcomes

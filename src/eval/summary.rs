@@ -162,8 +162,11 @@ pub struct SettingSummary {
     /// extracted whole, as the service answers `rule=none` (when the
     /// evaluation ran it: queries streamed in tiles).
     pub time_share_whole: Option<TimeShare>,
-    /// Mean fraction of the image's tiles extracted.
+    /// Mean fraction of the image's tiles extracted (the coarse pass counted
+    /// as one).
     pub tiles: f64,
+    /// Share of the searches that started with the coarse pass.
+    pub coarse_first: f64,
     /// The metrics of every run: `runs[seed][run]`.
     pub runs: Vec<Vec<RunMetrics>>,
 }
@@ -214,6 +217,7 @@ impl SettingSummary {
             time_share: TimeShare::default(),
             time_share_whole: None,
             tiles: 1.0,
+            coarse_first: 0.0,
             runs: vec![],
         }
     }
@@ -331,7 +335,9 @@ pub struct SeedOutcomes<'a> {
     pub whole_ms: Option<&'a [Vec<f64>]>,
 }
 
-/// Summarise a setting from its outcomes on each vocabulary seed.
+/// Summarise a setting from its outcomes on each vocabulary seed;
+/// `tiles_total` is each query's number of tiles, the coarse pass not
+/// counted.
 pub fn summarize(
     setting: &Setting,
     seeds: &[SeedOutcomes<'_>],
@@ -358,7 +364,12 @@ pub fn summarize(
     let tile_shares: Vec<f64> = seeds
         .iter()
         .flat_map(|s| s.runs.iter().flat_map(|r| r.iter().zip(tiles_total)))
-        .map(|(o, &n)| o.tiles as f64 / n.max(1) as f64)
+        .map(|(o, &n)| o.tiles as f64 / (n + usize::from(o.coarse)).max(1) as f64)
+        .collect();
+    let coarse_first: Vec<f64> = seeds
+        .iter()
+        .flat_map(|s| s.runs.iter().flatten())
+        .map(|o| f64::from(u8::from(o.coarse)))
         .collect();
     // request times of every seed's runs, against that seed's full search
     let ms: Vec<Vec<f64>> = seeds
@@ -385,6 +396,7 @@ pub fn summarize(
         time_share: TimeShare::of(&ms, &full),
         time_share_whole: whole.map(|w| TimeShare::of(&ms, &w)),
         tiles: metrics::mean(&tile_shares),
+        coarse_first: metrics::mean(&coarse_first),
         runs: per_run,
     }
 }
@@ -417,6 +429,7 @@ mod tests {
             verify_ms: 0.0,
             tiles: 1,
             verified: false,
+            coarse: false,
         }
     }
 

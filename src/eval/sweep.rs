@@ -3,7 +3,9 @@
 //! found for a dataset, and running every setting over every Monte Carlo run
 //! and query on pre-quantized words.
 
+use super::summary::{QueryCost, stage_sample};
 use super::tiles::Query;
+use crate::features::CoarseChoice;
 use crate::calibrate::median_features;
 use crate::index::MapIndex;
 use crate::search::stop::RULES;
@@ -255,6 +257,9 @@ pub struct Outcome {
     pub tiles: u16,
     /// The best candidate is geometrically verified.
     pub verified: bool,
+    /// Its extraction started with the coarse pass.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub coarse: bool,
 }
 
 fn id_score_pairs<S: Serializer>(list: &[Ranked], s: S) -> Result<S::Ok, S::Error> {
@@ -292,6 +297,7 @@ pub fn search_one(
         verify_ms: 0.0,
         tiles: 1,
         verified: false,
+        coarse: false,
     }
 }
 
@@ -314,6 +320,7 @@ pub fn search_query(
         verify_ms: r.verify_ms as f32,
         tiles: r.tiles as u16,
         verified: r.verified,
+        coarse: query.coarse_first,
     }
 }
 
@@ -603,6 +610,64 @@ pub fn run_all(
     result
 }
 
+/// A learned coarse pass's queries: each one cut without and with the
+/// coarse pass (timed together), and what quantizing a feature of each cost.
+#[derive(Clone, Copy)]
+pub struct LearnedPlan<'a> {
+    pub plain: (&'a [Query], &'a [QueryCost]),
+    pub coarse: (&'a [Query], &'a [QueryCost]),
+}
+
+/// [`run_all`] for a learned coarse pass, replayed as the service learns it:
+/// for each setting and run, a fresh [`CoarseChoice`] sees the queries in
+/// order, picks each one's plan, and is told what the search cost (every
+/// stage, from the cache's timings) and whether it ended on its first unit.
+/// A setting whose rule never stops early searches without the coarse pass
+/// and learns nothing, as the service's does. The progress bar advances once
+/// per setting and run.
+pub fn run_learned(
+    map: &MapIndex,
+    plan: LearnedPlan<'_>,
+    settings: &[Setting],
+    runs: u32,
+    ranking: Ranking,
+    bar: &ProgressBar,
+) -> Vec<Vec<Vec<Outcome>>> {
+    let pairs: Vec<(usize, u32)> = (0..settings.len())
+        .flat_map(|s| (0..runs).map(move |r| (s, r)))
+        .collect();
+    let mut flat: Vec<Vec<Outcome>> = pairs
+        .par_iter()
+        .map(|&(s, run)| {
+            let setting = &settings[s];
+            let choice = setting
+                .rule
+                .info()
+                .stops_early
+                .then(CoarseChoice::default);
+            let out = (0..plan.plain.0.len())
+                .map(|q| {
+                    let coarse = choice.as_ref().is_some_and(CoarseChoice::choose);
+                    let (queries, costs) = if coarse { plan.coarse } else { plan.plain };
+                    let o = search_query(map, &queries[q], setting, seed(run, q), ranking);
+                    if let Some(choice) = &choice {
+                        let ms = stage_sample(&o, &costs[q]).total();
+                        choice.record(coarse, ms, o.tiles <= 1);
+                    }
+                    o
+                })
+                .collect();
+            bar.inc(1);
+            out
+        })
+        .collect();
+    let mut result: Vec<Vec<Vec<Outcome>>> = Vec::with_capacity(settings.len());
+    for _ in settings {
+        result.push(flat.drain(..runs as usize).collect());
+    }
+    result
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -714,6 +779,75 @@ mod tests {
             mean_fraction(&map, &queries, &settings[1], 0, Ranking::top(1)),
             0.5
         );
+    }
+
+    #[test]
+    fn the_learned_plan_is_replayed_query_by_query_as_the_service_learns_it() {
+        use super::super::tiles::Tile;
+        let map = toy_map();
+        let tile = |features: u32, ms: f32| Tile {
+            features,
+            area: 0.25,
+            ms,
+            corners: 0.0,
+            cell: [0, 0],
+        };
+        // four tiles of 10 features, all on image 0; with the coarse pass, 8
+        // of them found first at a fifth of a tile's cost
+        let plain = Query {
+            words: vec![0; 40],
+            tiles: vec![tile(10, 10.0); 4],
+            ..Query::default()
+        };
+        let coarse = Query {
+            words: vec![0; 40],
+            tiles: [tile(8, 2.0)]
+                .into_iter()
+                .chain([tile(8, 10.0); 4])
+                .collect(),
+            coarse_first: true,
+            ..Query::default()
+        };
+        let n = 100;
+        let plain = vec![plain; n];
+        let coarse = vec![coarse; n];
+        let costs = vec![
+            QueryCost {
+                quantize_ms_per_feature: 0.01
+            };
+            n
+        ];
+        let plan = LearnedPlan {
+            plain: (&plain, &costs),
+            coarse: (&coarse, &costs),
+        };
+        // `fixed 0.2` would stop on the coarse pass's 8 features, but a vote
+        // statistic may not stop there: the coarse plan costs more, and is
+        // tried only in the trials and then one request in EXPLORE_EVERY;
+        // the full search never learns
+        let settings = vec![
+            Setting::new(RuleSpec::new("none", None).unwrap(), 0),
+            Setting::new(RuleSpec::new("fixed", Some(0.2)).unwrap(), 0),
+        ];
+        let bar = ProgressBar::hidden();
+        let r = run_learned(&map, plan, &settings, 2, Ranking::top(1), &bar);
+        assert_eq!((r.len(), r[0].len(), r[0][0].len()), (2, 2, n));
+        assert!(r[0].iter().flatten().all(|o| !o.coarse && o.tiles == 4));
+        for run in &r[1] {
+            let started: Vec<bool> = run.iter().map(|o| o.coarse).collect();
+            let explored = (2 * CoarseChoice::TRIAL + 1..=n as u64)
+                .filter(|k| k.is_multiple_of(CoarseChoice::EXPLORE_EVERY))
+                .count();
+            assert_eq!(
+                started.iter().filter(|&&c| c).count(),
+                CoarseChoice::TRIAL as usize + explored
+            );
+            // trials alternate, plain first
+            assert!(!started[0] && started[1]);
+            for o in run {
+                assert_eq!(o.tiles, if o.coarse { 2 } else { 1 }, "{o:?}");
+            }
+        }
     }
 
     #[test]

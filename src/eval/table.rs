@@ -441,9 +441,13 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
     .map(String::from)
     .to_vec();
     let whole = picked.iter().any(|x| x.time_share_whole.is_some());
+    let coarse = picked.iter().any(|x| x.coarse_first > 0.0);
     let mut header = header;
     if whole {
         header.push("× whole-image full search, mean / median".into());
+    }
+    if coarse {
+        header.push("% started coarse".into());
     }
     let rows: Vec<Vec<String>> = picked
         .iter()
@@ -464,6 +468,7 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
                 x.time_share_whole
                     .map_or("–".into(), |w| format!("{:.3} / {:.3}", w.mean, w.median))
             }))
+            .chain(coarse.then(|| pct(x.coarse_first)))
             .collect()
         })
         .collect();
@@ -481,7 +486,10 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
          re-ranking. `× full search`: the request time against the full search's on the same \
          query (tiled; the `(whole image)` row is the full search on queries extracted \
          whole); `× whole-image full search`: against that whole-image full search, which is \
-         how the service answers `rule=none`. Measured on this machine with all cores busy (queries run in parallel); \
+         how the service answers `rule=none`. With a learned coarse pass (`,auto`) each \
+         setting and run replays the service's choice over the queries in order, from what \
+         each search cost; `% started coarse`: the searches it started with the coarse pass \
+         (`% tiles` counts that pass as a tile). Measured on this machine with all cores busy (queries run in parallel); \
          every setting's times are in `results.csv`.\n\n{}\n",
         t.total_s,
         t.extract_s,
@@ -589,6 +597,7 @@ fn csv_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::Result<()
         header.push(format!("time_share_{of}_mean"));
         header.push(format!("time_share_{of}_median"));
     }
+    header.extend(["tiles_mean", "coarse_first_mean"].map(String::from));
     w.write_record(&header)?;
     for s in &report.settings {
         let mut r = vec![
@@ -624,6 +633,8 @@ fn csv_rows(report: &Report, out: &mut dyn std::io::Write) -> std::io::Result<()
             r.push(share.map_or(String::new(), |x| format!("{:.4}", x.mean)));
             r.push(share.map_or(String::new(), |x| format!("{:.4}", x.median)));
         }
+        r.push(format!("{:.4}", s.tiles));
+        r.push(format!("{:.4}", s.coarse_first));
         w.write_record(&r)?;
     }
     w.flush()?;

@@ -146,6 +146,36 @@ pub struct TilePlan {
     pub learn_coarse: bool,
 }
 
+impl TilePlan {
+    /// The grids its queries may be cut in: the grid alone, or (learned) the
+    /// grid without and with the coarse pass.
+    pub fn grids(&self) -> Vec<TileGrid> {
+        if self.learn_coarse {
+            vec![
+                TileGrid {
+                    coarse: false,
+                    ..self.grid
+                },
+                TileGrid {
+                    coarse: true,
+                    ..self.grid
+                },
+            ]
+        } else {
+            vec![self.grid]
+        }
+    }
+}
+
+impl From<TileGrid> for TilePlan {
+    fn from(grid: TileGrid) -> Self {
+        Self {
+            grid,
+            learn_coarse: false,
+        }
+    }
+}
+
 impl std::str::FromStr for TilePlan {
     type Err = String;
 
