@@ -60,8 +60,9 @@ pub struct EvalArgs {
     /// The queries' tile grid for streaming extraction,
     /// COLSxROWS[+MARGIN][,coarse|,auto] (1x1: whole images; `,coarse`: a
     /// half-size pass first; `,auto`: the coarse pass learned per request as
-    /// the service learns it, replayed over the queries in order for each
-    /// setting and run). The full search also runs on whole queries.
+    /// the service learns it: per setting, from a fresh start, over the runs
+    /// in turn, each the queries in order). The full search also runs on
+    /// whole queries.
     #[arg(long, default_value = "2x2+24")]
     tiles: TilePlan,
     /// The order the tiles are replayed in, as the service extracts them.

@@ -5,8 +5,8 @@
 
 use super::summary::{QueryCost, stage_sample};
 use super::tiles::Query;
-use crate::features::CoarseChoice;
 use crate::calibrate::median_features;
+use crate::features::CoarseChoice;
 use crate::index::MapIndex;
 use crate::search::stop::RULES;
 use crate::search::{
@@ -619,12 +619,13 @@ pub struct LearnedPlan<'a> {
 }
 
 /// [`run_all`] for a learned coarse pass, replayed as the service learns it:
-/// for each setting and run, a fresh [`CoarseChoice`] sees the queries in
-/// order, picks each one's plan, and is told what the search cost (every
-/// stage, from the cache's timings) and whether it ended on its first unit.
-/// A setting whose rule never stops early searches without the coarse pass
-/// and learns nothing, as the service's does. The progress bar advances once
-/// per setting and run.
+/// for each setting, a fresh [`CoarseChoice`] (a server just started) sees
+/// the runs one after the other, each the queries in order, picks each
+/// search's plan, and is told what the search cost (every stage, from the
+/// cache's timings) and whether it ended on its first unit. A setting whose
+/// rule never stops early searches without the coarse pass and learns
+/// nothing, as the service's does. The progress bar advances once per
+/// setting and run.
 pub fn run_learned(
     map: &MapIndex,
     plan: LearnedPlan<'_>,
@@ -633,39 +634,30 @@ pub fn run_learned(
     ranking: Ranking,
     bar: &ProgressBar,
 ) -> Vec<Vec<Vec<Outcome>>> {
-    let pairs: Vec<(usize, u32)> = (0..settings.len())
-        .flat_map(|s| (0..runs).map(move |r| (s, r)))
-        .collect();
-    let mut flat: Vec<Vec<Outcome>> = pairs
+    settings
         .par_iter()
-        .map(|&(s, run)| {
-            let setting = &settings[s];
-            let choice = setting
-                .rule
-                .info()
-                .stops_early
-                .then(CoarseChoice::default);
-            let out = (0..plan.plain.0.len())
-                .map(|q| {
-                    let coarse = choice.as_ref().is_some_and(CoarseChoice::choose);
-                    let (queries, costs) = if coarse { plan.coarse } else { plan.plain };
-                    let o = search_query(map, &queries[q], setting, seed(run, q), ranking);
-                    if let Some(choice) = &choice {
-                        let ms = stage_sample(&o, &costs[q]).total();
-                        choice.record(coarse, ms, o.tiles <= 1);
-                    }
-                    o
+        .map(|setting| {
+            let choice = setting.rule.info().stops_early.then(CoarseChoice::default);
+            (0..runs)
+                .map(|run| {
+                    let out = (0..plan.plain.0.len())
+                        .map(|q| {
+                            let coarse = choice.as_ref().is_some_and(CoarseChoice::choose);
+                            let (queries, costs) = if coarse { plan.coarse } else { plan.plain };
+                            let o = search_query(map, &queries[q], setting, seed(run, q), ranking);
+                            if let Some(choice) = &choice {
+                                let ms = stage_sample(&o, &costs[q]).total();
+                                choice.record(coarse, ms, o.tiles <= 1);
+                            }
+                            o
+                        })
+                        .collect();
+                    bar.inc(1);
+                    out
                 })
-                .collect();
-            bar.inc(1);
-            out
+                .collect()
         })
-        .collect();
-    let mut result: Vec<Vec<Vec<Outcome>>> = Vec::with_capacity(settings.len());
-    for _ in settings {
-        result.push(flat.drain(..runs as usize).collect());
-    }
-    result
+        .collect()
 }
 
 #[cfg(test)]
@@ -833,20 +825,19 @@ mod tests {
         let r = run_learned(&map, plan, &settings, 2, Ranking::top(1), &bar);
         assert_eq!((r.len(), r[0].len(), r[0][0].len()), (2, 2, n));
         assert!(r[0].iter().flatten().all(|o| !o.coarse && o.tiles == 4));
-        for run in &r[1] {
-            let started: Vec<bool> = run.iter().map(|o| o.coarse).collect();
-            let explored = (2 * CoarseChoice::TRIAL + 1..=n as u64)
-                .filter(|k| k.is_multiple_of(CoarseChoice::EXPLORE_EVERY))
-                .count();
-            assert_eq!(
-                started.iter().filter(|&&c| c).count(),
-                CoarseChoice::TRIAL as usize + explored
-            );
-            // trials alternate, plain first
-            assert!(!started[0] && started[1]);
-            for o in run {
-                assert_eq!(o.tiles, if o.coarse { 2 } else { 1 }, "{o:?}");
-            }
+        // one choice learns over both runs, as one server would
+        let started: Vec<bool> = r[1].iter().flatten().map(|o| o.coarse).collect();
+        let explored = (2 * CoarseChoice::TRIAL + 1..=2 * n as u64)
+            .filter(|k| k.is_multiple_of(CoarseChoice::EXPLORE_EVERY))
+            .count();
+        assert_eq!(
+            started.iter().filter(|&&c| c).count(),
+            CoarseChoice::TRIAL as usize + explored
+        );
+        // trials alternate, plain first
+        assert!(!started[0] && started[1]);
+        for o in r[1].iter().flatten() {
+            assert_eq!(o.tiles, if o.coarse { 2 } else { 1 }, "{o:?}");
         }
     }
 

@@ -487,8 +487,8 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
          query (tiled; the `(whole image)` row is the full search on queries extracted \
          whole); `× whole-image full search`: against that whole-image full search, which is \
          how the service answers `rule=none`. With a learned coarse pass (`,auto`) each \
-         setting and run replays the service's choice over the queries in order, from what \
-         each search cost; `% started coarse`: the searches it started with the coarse pass \
+         setting replays the service's choice from a fresh start over its runs in turn, each \
+         the queries in order, from what each search cost; `% started coarse`: the searches it started with the coarse pass \
          (`% tiles` counts that pass as a tile). Measured on this machine with all cores busy (queries run in parallel); \
          every setting's times are in `results.csv`.\n\n{}\n",
         t.total_s,
