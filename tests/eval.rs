@@ -261,4 +261,47 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
     let md = std::fs::read_to_string(out2.join("results.md")).unwrap();
     assert!(md.contains("### Settings asked for") && md.contains("relative 2.5 w=100"));
     assert!(!out2.join("recall_vs_features.png").exists());
+
+    // The learned coarse pass, replayed: the trials alternate between the
+    // two plans, and the full search (which never stops early) never
+    // starts with the coarse pass.
+    let out3 = dir.path().join("out3");
+    eval(
+        &out3,
+        &cache,
+        &[
+            "--runs",
+            "2",
+            "--rules",
+            "none",
+            "--set",
+            "place-z=2+verified=12@20",
+            "--tiles",
+            "2x2+24,auto",
+            "--no-plots",
+        ],
+    );
+    let learned: Value =
+        serde_json::from_slice(&std::fs::read(out3.join("results.json")).unwrap()).unwrap();
+    let asked = learned["explicit"][0].as_u64().unwrap() as usize;
+    assert_ne!(asked, 0);
+    let started_coarse = |setting: usize| -> Vec<bool> {
+        learned["per_query"]["outcomes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|seed| seed[setting].as_array().unwrap().iter())
+            .flat_map(|run| run.as_array().unwrap().iter())
+            .map(|o| o["coarse"] == true)
+            .collect()
+    };
+    assert!(started_coarse(0).iter().all(|&c| !c));
+    let per_seed = started_coarse(asked);
+    let queries = per_seed.len() / 4; // 2 seeds × 2 runs
+    for seed in per_seed.chunks(2 * queries) {
+        // plain first, then the coarse pass, through the trials
+        assert_eq!(seed[..16], [false, true].repeat(8)[..], "{seed:?}");
+    }
+    let md = std::fs::read_to_string(out3.join("results.md")).unwrap();
+    assert!(md.contains("% started coarse"), "{md}");
 }
