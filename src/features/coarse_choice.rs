@@ -20,7 +20,9 @@
 //! plan's times are bimodal (most requests end after the coarse pass, the
 //! rest pay for it on top of the tiles), and a mean would weigh the few slow
 //! requests as much as the many fast ones.
-//! No OpenCV here: the policy is plain arithmetic over reported times.
+//! No OpenCV here: the policy is plain arithmetic over reported times, and
+//! `bowloc eval --tiles …,auto` replays it over cached queries
+//! (`eval::sweep::run_learned`).
 
 use std::sync::Mutex;
 
