@@ -8,7 +8,10 @@ not stop reads every feature, so a rule whose stops come late or seldom
 cannot use few features on average, however it is tuned. Against a baseline
 setting (default "none +verify", the verified full search): how many stopped
 searches answer wrong at top-1 where the baseline answers right (what the
-stops cost), and how many answer right where it does not.
+stops cost), how many answer right where it does not, and their difference
+in points of recall@1. Last, the share of searches that would have to stop,
+at the features the stopped ones used on average, for a mean of half the
+features.
 
     scripts/early-stops.py data/eval/<run>/results.json [BASELINE]
 """
@@ -33,7 +36,7 @@ def main():
 
     print(f"{path}: searches over seeds x runs x queries; stopped = ended by the rule before the last feature")
     print(f"{'setting':42} {'stopped':>8} {'their features, median / mean':>30} {'all, mean':>10} "
-          f"{'worse than ' + baseline:>24} {'better':>7}")
+          f"{'worse than ' + baseline:>24} {'better':>7} {'net, points':>11} {'stops for a 50 % mean':>22}")
     for i, label in enumerate(labels):
         stopped, fractions, worse, better, searches = 0, [], 0, 0, 0
         all_fractions = []
@@ -50,8 +53,12 @@ def main():
                         better += right(o, q) and not right(b, q)
         theirs = (f"{100 * statistics.median(fractions):.1f} / {100 * statistics.mean(fractions):.1f} %"
                   if fractions else "-")
+        # mean = s * m + (1 - s) = 0.5 with m the stopped searches' mean
+        needed = (f"{100 * 0.5 / (1 - statistics.mean(fractions)):.1f}%"
+                  if fractions and statistics.mean(fractions) < 0.5 else "-")
         print(f"{label:42} {100 * stopped / searches:7.1f}% {theirs:>30} "
-              f"{100 * statistics.mean(all_fractions):9.1f}% {worse:>24} {better:>7}")
+              f"{100 * statistics.mean(all_fractions):9.1f}% {worse:>24} {better:>7} "
+              f"{100 * (worse - better) / searches:11.1f} {needed:>22}")
 
 
 if __name__ == "__main__":
