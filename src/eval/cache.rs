@@ -155,6 +155,11 @@ impl DescriptorSet {
             .collect()
     }
 
+    /// Decoding image `i`, in milliseconds.
+    pub fn decode_ms(&self, i: usize) -> f64 {
+        self.meta.decode_ms[i]
+    }
+
     /// Decode plus extraction time of image `i`, in milliseconds.
     pub fn extract_ms(&self, i: usize) -> f64 {
         self.meta.decode_ms[i] + self.meta.extract_ms[i]

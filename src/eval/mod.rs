@@ -384,6 +384,7 @@ fn quantize_queries(
             bar.inc(1);
             let cost = QueryCost {
                 quantize_ms_per_feature: w.quantize_ms_per_feature,
+                decode_ms: set.decode_ms(q),
             };
             (set.query(q, w.words, w.signatures), cost)
         })
@@ -620,39 +621,31 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         "sweeping"
     );
 
-    let outcomes: Vec<Vec<Vec<Vec<Outcome>>>> = match &per_seed_coarse {
-        None => {
-            let bar = progress_bar((counts.len() * seeds.len()) as u64, "sweeping");
-            let o = maps
-                .iter()
-                .zip(&per_seed)
-                .map(|(map, q)| {
-                    sweep::run_all(map, &q.queries, &settings, config.runs, ranking, &bar)
-                })
-                .collect();
-            bar.finish_and_clear();
-            o
-        }
-        Some(coarse) => {
-            let bar = progress_bar(
-                (settings.len() * config.runs as usize * seeds.len()) as u64,
-                "sweeping, the coarse pass learned",
-            );
-            let o = maps
-                .iter()
-                .zip(per_seed.iter().zip(coarse))
-                .map(|(map, (plain, coarse))| {
-                    let plan = sweep::LearnedPlan {
-                        plain: (&plain.queries, &plain.costs),
-                        coarse: (&coarse.queries, &coarse.costs),
-                    };
-                    sweep::run_learned(map, plan, &settings, config.runs, ranking, &bar)
-                })
-                .collect();
-            bar.finish_and_clear();
-            o
-        }
+    // The tiles alone advance the bar once per query, a learned coarse pass
+    // (replayed in order) once per setting and run.
+    let bar = match &per_seed_coarse {
+        None => progress_bar((counts.len() * seeds.len()) as u64, "sweeping"),
+        Some(_) => progress_bar(
+            (settings.len() * config.runs as usize * seeds.len()) as u64,
+            "sweeping, the coarse pass learned",
+        ),
     };
+    let outcomes: Vec<Vec<Vec<Vec<Outcome>>>> = maps
+        .iter()
+        .zip(&per_seed)
+        .enumerate()
+        .map(|(s, (map, plain))| match &per_seed_coarse {
+            None => sweep::run_all(map, &plain.queries, &settings, config.runs, ranking, &bar),
+            Some(coarse) => {
+                let plan = sweep::LearnedPlan {
+                    plain: (&plain.queries, &plain.costs),
+                    coarse: (&coarse[s].queries, &coarse[s].costs),
+                };
+                sweep::run_learned(map, plan, &settings, config.runs, ranking, &bar)
+            }
+        })
+        .collect();
+    bar.finish_and_clear();
     // the grid's tiles, without the coarse pass (an outcome adds it when it
     // started with it)
     let tiles_total: Vec<usize> = per_seed[0]

@@ -84,6 +84,9 @@ pub struct RunMetrics {
 pub struct QueryCost {
     /// Quantization time per feature, in milliseconds.
     pub quantize_ms_per_feature: f64,
+    /// Decoding the image, in milliseconds: part of every outcome's
+    /// extraction time, whatever the plan.
+    pub decode_ms: f64,
 }
 
 /// A query's request time under one outcome: decoding and extracting the
@@ -95,6 +98,13 @@ pub fn stage_sample(o: &Outcome, c: &QueryCost) -> StageSample {
         vote: o.vote_ms as f64,
         verify: o.verify_ms as f64,
     }
+}
+
+/// The time the service measures for a search (every stage but decoding,
+/// which it does before a plan is chosen), in milliseconds: what a learned
+/// plan is told a search cost.
+pub fn served_ms(o: &Outcome, c: &QueryCost) -> f64 {
+    (stage_sample(o, c).total() - c.decode_ms).max(0.0)
 }
 
 /// Request time of every outcome `runs[run][query]`, in milliseconds.
@@ -446,6 +456,7 @@ mod tests {
         let setting = Setting::new(RuleSpec::new("none", None).unwrap(), 0);
         let costs = [QueryCost {
             quantize_ms_per_feature: 0.1,
+            decode_ms: 0.0,
         }; 2];
         // the full search took 21 ms on every query (10 + 100 × 0.1 + 1)
         let full = vec![vec![21.0; 2]; 2];
@@ -523,6 +534,7 @@ mod tests {
         ]];
         let costs = [QueryCost {
             quantize_ms_per_feature: 0.1,
+            decode_ms: 0.0,
         }; 3];
         let full = vec![vec![21.0; 3]];
         let seeds = [SeedOutcomes {

@@ -3,7 +3,7 @@
 //! found for a dataset, and running every setting over every Monte Carlo run
 //! and query on pre-quantized words.
 
-use super::summary::{QueryCost, stage_sample};
+use super::summary::{QueryCost, served_ms};
 use super::tiles::Query;
 use crate::calibrate::median_features;
 use crate::features::CoarseChoice;
@@ -621,8 +621,8 @@ pub struct LearnedPlan<'a> {
 /// [`run_all`] for a learned coarse pass, replayed as the service learns it:
 /// for each setting, a fresh [`CoarseChoice`] (a server just started) sees
 /// the runs one after the other, each the queries in order, picks each
-/// search's plan, and is told what the search cost (every stage, from the
-/// cache's timings) and whether it ended on its first unit. A setting whose
+/// search's plan, and is told what the search cost (every stage but
+/// decoding, as the server measures it, from the cache's timings) and whether it ended on its first unit. A setting whose
 /// rule never stops early searches without the coarse pass and learns
 /// nothing, as the service's does. The progress bar advances once per
 /// setting and run.
@@ -646,8 +646,7 @@ pub fn run_learned(
                             let (queries, costs) = if coarse { plan.coarse } else { plan.plain };
                             let o = search_query(map, &queries[q], setting, seed(run, q), ranking);
                             if let Some(choice) = &choice {
-                                let ms = stage_sample(&o, &costs[q]).total();
-                                choice.record(coarse, ms, o.tiles <= 1);
+                                choice.record(coarse, served_ms(&o, &costs[q]), o.tiles <= 1);
                             }
                             o
                         })
@@ -805,7 +804,8 @@ mod tests {
         let coarse = vec![coarse; n];
         let costs = vec![
             QueryCost {
-                quantize_ms_per_feature: 0.01
+                quantize_ms_per_feature: 0.01,
+                decode_ms: 0.0,
             };
             n
         ];
