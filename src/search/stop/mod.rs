@@ -98,6 +98,18 @@ pub struct CheckedAnswer {
     pub scale: Option<f32>,
 }
 
+impl CheckedAnswer {
+    /// Verified with at least `min_inliers` inliers that show the scene at
+    /// the query's scale (within [`or_verified::MAX_LOG_SCALE`]): an answer
+    /// taken where the query was, not a few steps before or after it.
+    pub fn verified_at_scale(&self, min_inliers: usize) -> bool {
+        self.inliers >= min_inliers
+            && self
+                .scale
+                .is_some_and(|s| s > 0.0 && s.ln().abs() <= or_verified::MAX_LOG_SCALE)
+    }
+}
+
 /// What a rule may know about the search it runs in.
 #[derive(Debug, Clone)]
 pub struct RuleContext {

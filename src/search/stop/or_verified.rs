@@ -18,7 +18,7 @@
 //! its `verify.top_k` model fits, about half a millisecond each); a search
 //! with no tile left, or extracted whole, has the vote rule alone.
 
-use super::{CheckedAnswer, LeaderCheck, Needs, StopRule, VoteStats};
+use super::{LeaderCheck, Needs, StopRule, VoteStats};
 use crate::search::Voted;
 
 /// Largest |ln scale| of an answer taken where the query was: its inliers
@@ -34,16 +34,6 @@ pub struct OrVerified {
     /// ([`RuleContext::top_n`](super::RuleContext::top_n)), which a
     /// verifying search sets to at least its `verify.top_k`.
     pub candidates: usize,
-}
-
-impl OrVerified {
-    /// Whether `answer` stops the search.
-    fn verified_at_scale(&self, answer: &CheckedAnswer) -> bool {
-        answer.inliers >= self.min_inliers
-            && answer
-                .scale
-                .is_some_and(|s| s > 0.0 && s.ln().abs() <= MAX_LOG_SCALE)
-    }
 }
 
 impl StopRule for OrVerified {
@@ -96,7 +86,7 @@ impl StopRule for OrVerified {
             .map(|&(h, id)| (id, h))
             .collect();
         let answer = leader_check?.answer(&candidates, voted)?;
-        self.verified_at_scale(&answer).then(|| {
+        answer.verified_at_scale(self.min_inliers).then(|| {
             format!(
                 "answer {} verified at the query's scale: {} inliers ≥ {}, scale {:.2}",
                 answer.id,

@@ -444,6 +444,53 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
 
 /// Where `rule` stops on `stream` (every check offered at a batch's end),
 /// with `check` as the geometric check if given.
+#[test]
+fn verified_stops_on_the_checked_answer_at_the_query_scale_not_only_the_leader() {
+    // image 0 verifies, but shows the scene 1.5 times larger than the
+    // query: a near miss, never a stop
+    let s = [0u32; 200];
+    let mut c = FakeCheck {
+        inliers: 50,
+        calls: 0,
+        scale: 1.5,
+    };
+    assert_eq!(verified_stop(8.0, &s, &mut c), None);
+    assert_eq!(c.calls, 200);
+    // image 1 leads the votes, image 0 is second and verifies: with the
+    // top 4 handed to the check the answer is image 0, and the search stops
+    let map = one_word_per_image();
+    let view = map.view();
+    let context = RuleContext {
+        top_n: 4,
+        ..RuleContext::default()
+    };
+    let mut rule = spec("verified", 8.0).build(&context);
+    let mut voter = Voter::with_needs(&view, rule.needs());
+    let mut c = FakeCheck {
+        inliers: 8,
+        calls: 0,
+        scale: 1.1,
+    };
+    let mut voted = Vec::new();
+    for (i, w) in [1u32, 1, 0].into_iter().enumerate() {
+        voter.vote(w, 0);
+        voted.push(Voted {
+            feature: i as u32,
+            word: w,
+            signature: 0,
+        });
+    }
+    assert_eq!(voter.tally().leader, Some(1));
+    let why = rule.check_with(&voter, &voted, Some(&mut c), true);
+    assert!(why.is_some_and(|w| w.starts_with("answer 0 verified")));
+    // with the leader alone handed to it, the same votes do not stop
+    let mut rule = spec("verified", 8.0).build(&RuleContext::default());
+    assert!(
+        rule.check_with(&voter, &voted, Some(&mut c), true)
+            .is_none()
+    );
+}
+
 fn stops_with_check(
     rule: &RuleSpec,
     stream: &[u32],

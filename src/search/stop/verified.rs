@@ -1,39 +1,48 @@
-//! Rule `verified` (m): stop once the leader is geometrically verified with
-//! at least m inliers against the features voted so far. Votes only choose
-//! which image to check; the check itself is a robust model fit between the
-//! query's keypoints and the candidate's stored keypoints (done outside the
-//! core, through [`LeaderCheck`]). A query whose leader never verifies runs to
-//! the end of its features, like the full search: easy queries stop early,
-//! hard ones lose nothing.
+//! Rule `verified` (m): stop once the answer verification would give now is
+//! geometrically verified with at least m inliers against the features voted
+//! so far, and its inliers show the scene at the query's scale
+//! ([`CheckedAnswer::verified_at_scale`](super::CheckedAnswer::verified_at_scale)). Votes only choose which images to
+//! check: the search's top candidates, verified and re-ranked as the final
+//! answer is, through a robust model fit between the query's keypoints and
+//! each candidate's stored keypoints (done outside the core, through
+//! [`LeaderCheck`]). A query whose answer never verifies runs to the end of
+//! its features, like the full search: easy queries stop early, hard ones
+//! lose nothing.
+//!
+//! The scale is the check [`or_verified`](super::or_verified) makes too: a
+//! map image a few steps before or after the query shares its geometry, and
+//! stopping on such a near miss loses the answer taken where the query was
+//! (docs/results.md, "The verified stop at the query's scale").
 //!
 //! A check costs far more than a vote, so the search offers one only at the
 //! end of a block of features. The rule takes every check offered at the end
 //! of a batch (a tile of streaming extraction): a tile's extraction costs
-//! more than a check, so a leader left unchecked there would cost a whole
+//! more than a check, so an answer left unchecked there would cost a whole
 //! tile more. Inside a tile, where stopping saves quantization and votes but
 //! no extraction, it checks on a geometric schedule: once the features voted
 //! have grown by [`GROWTH`] since the last check, so a query is checked
 //! O(log N) times. A leader is not checked twice on the same votes.
 
-use super::{Grid, LeaderCheck, Parameter, Range, RuleInfo, StopRule, VoteStats};
+use super::{Grid, LeaderCheck, Needs, Parameter, Range, RuleInfo, StopRule, VoteStats};
 use crate::search::Voted;
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "verified",
     parameter: Some(Parameter {
         name: "inliers",
-        meaning: "m, the inliers that verify the leader (a homography needs 4 points)",
+        meaning: "m, the inliers that verify the answer (a homography needs 4 points)",
         range: Range::Whole { min: 4, max: 1000 },
         example: 12.0,
     }),
     grid: Grid::Values(&[8.0, 12.0, 16.0, 24.0]),
-    about: "stop when the leader is geometrically verified with at least m inliers",
+    about: "stop when the answer is geometrically verified with at least m inliers at the query's scale",
     stops_early: true,
     geometric: true,
     whole_histogram: false,
-    make: |m, _| {
+    make: |m, context| {
         Ok(Box::new(Verified {
             min_inliers: m as usize,
+            candidates: context.top_n.max(1),
             checked: None,
             inliers: None,
         }))
@@ -46,6 +55,7 @@ pub const GROWTH: f64 = 1.5;
 
 struct Verified {
     min_inliers: usize,
+    candidates: usize,
     /// The leader and the feature count of the last check.
     checked: Option<(u32, usize)>,
     /// Inliers of the last check.
@@ -53,6 +63,13 @@ struct Verified {
 }
 
 impl StopRule for Verified {
+    fn needs(&self) -> Needs {
+        Needs {
+            top: self.candidates,
+            ..Needs::default()
+        }
+    }
+
     fn check(&mut self, _: &dyn VoteStats) -> Option<String> {
         None
     }
@@ -76,13 +93,19 @@ impl StopRule for Verified {
         {
             return None;
         }
-        let inliers = checker.inliers(leader, voted);
         self.checked = Some((leader, t.features));
-        self.inliers = Some(inliers);
-        (inliers >= self.min_inliers).then(|| {
+        let candidates: Vec<(u32, f32)> = voter
+            .top()
+            .iter()
+            .take(self.candidates)
+            .map(|&(h, id)| (id, h))
+            .collect();
+        let answer = checker.answer(&candidates, voted)?;
+        self.inliers = Some(answer.inliers);
+        answer.verified_at_scale(self.min_inliers).then(|| {
             format!(
-                "leader {leader} verified: {inliers} inliers ≥ {}",
-                self.min_inliers
+                "answer {} verified at the query's scale: {} inliers ≥ {}",
+                answer.id, answer.inliers, self.min_inliers
             )
         })
     }
