@@ -113,7 +113,7 @@ pub struct SearchArgs {
     /// f of rule fixed: the share of the features to use, in (0, 1].
     #[arg(long)]
     pub fraction: Option<f64>,
-    /// m of rule verified: the inliers that verify the leader.
+    /// m of rule verified: the inliers that verify the answer (at the query's scale).
     #[arg(long)]
     pub inliers: Option<f64>,
     /// ε of rule posterior: the probability left to places other than the leader's.
