@@ -98,15 +98,21 @@ pub struct CheckedAnswer {
     pub scale: Option<f32>,
 }
 
+/// Largest |ln scale| of an answer taken where the query was: its inliers
+/// spread at most e^0.2 ≈ 1.22 times more (or less) in the map image than
+/// in the query. Chosen on gardens-point with `scripts/tile-ends.sh`
+/// (docs/results.md, "A verified stop beside the rule").
+pub const MAX_LOG_SCALE: f32 = 0.2;
+
 impl CheckedAnswer {
     /// Verified with at least `min_inliers` inliers that show the scene at
-    /// the query's scale (within [`or_verified::MAX_LOG_SCALE`]): an answer
+    /// the query's scale (within [`MAX_LOG_SCALE`]): an answer
     /// taken where the query was, not a few steps before or after it.
     pub fn verified_at_scale(&self, min_inliers: usize) -> bool {
         self.inliers >= min_inliers
             && self
                 .scale
-                .is_some_and(|s| s > 0.0 && s.ln().abs() <= or_verified::MAX_LOG_SCALE)
+                .is_some_and(|s| s > 0.0 && s.ln().abs() <= MAX_LOG_SCALE)
     }
 }
 

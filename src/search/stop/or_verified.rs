@@ -9,7 +9,7 @@
 //! The scale matters: a map image taken a few steps before or after the query
 //! shares its geometry too (the scene smaller or larger in it), and such near
 //! misses are most of a route's wrong answers. An answer whose inliers show
-//! the scene at the query's scale, within [`MAX_LOG_SCALE`], is one taken
+//! the scene at the query's scale, within [`MAX_LOG_SCALE`](super::MAX_LOG_SCALE), is one taken
 //! where the query was.
 //!
 //! Stopping saves time only where it saves extraction, so the check runs at
@@ -20,12 +20,6 @@
 
 use super::{LeaderCheck, Needs, StopRule, VoteStats};
 use crate::search::Voted;
-
-/// Largest |ln scale| of an answer taken where the query was: its inliers
-/// spread at most e^0.2 ≈ 1.22 times more (or less) in the map image than
-/// in the query. Chosen on gardens-point with `scripts/tile-ends.sh`
-/// (docs/results.md, "A verified stop beside the rule").
-pub const MAX_LOG_SCALE: f32 = 0.2;
 
 pub struct OrVerified {
     pub votes: Box<dyn StopRule>,
