@@ -162,7 +162,7 @@ impl DescriptorSet {
 
     /// Decode plus extraction time of image `i`, in milliseconds.
     pub fn extract_ms(&self, i: usize) -> f64 {
-        self.meta.decode_ms[i] + self.meta.extract_ms[i]
+        self.decode_ms(i) + self.meta.extract_ms[i]
     }
 
     /// Image `i` as the sweep replays it, given its words (rows in order):

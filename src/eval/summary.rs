@@ -444,6 +444,18 @@ mod tests {
     }
 
     #[test]
+    fn a_learned_plan_is_told_the_request_without_decoding() {
+        // 10 ms extraction (decoding included) + 50 × 0.1 quantization + 1 vote
+        let o = outcome(&[(1, 0.9)], 50);
+        let c = QueryCost {
+            quantize_ms_per_feature: 0.1,
+            decode_ms: 2.0,
+        };
+        assert_eq!(stage_sample(&o, &c).total(), 16.0);
+        assert_eq!(served_ms(&o, &c), 14.0);
+    }
+
+    #[test]
     fn metrics_are_computed_per_run_then_averaged() {
         let truth: Vec<HashSet<u32>> = vec![[1].into(), [2].into()];
         // Run 0: both right at rank 1 → recall@90%P 1. Run 1: q1 answers

@@ -116,6 +116,36 @@ impl CheckedAnswer {
     }
 }
 
+/// The geometric stop both `verified` and a vote rule's `or_verified` make:
+/// the voter's top `candidates` handed to `checker`, which verifies and
+/// re-ranks them as the final answer is. Returns that answer (`None` without
+/// candidates) and, when it is verified with at least `min_inliers` inliers
+/// at the query's scale, why the search stops.
+fn check_answer(
+    voter: &dyn VoteStats,
+    voted: &[Voted],
+    checker: &mut dyn LeaderCheck,
+    candidates: usize,
+    min_inliers: usize,
+) -> Option<(CheckedAnswer, Option<String>)> {
+    let top: Vec<(u32, f32)> = voter
+        .top()
+        .iter()
+        .take(candidates)
+        .map(|&(h, id)| (id, h))
+        .collect();
+    let answer = checker.answer(&top, voted)?;
+    let why = answer.verified_at_scale(min_inliers).then(|| {
+        format!(
+            "answer {} verified at the query's scale: {} inliers ≥ {min_inliers}, scale {:.2}",
+            answer.id,
+            answer.inliers,
+            answer.scale.unwrap_or(0.0)
+        )
+    });
+    Some((answer, why))
+}
+
 /// What a rule may know about the search it runs in.
 #[derive(Debug, Clone)]
 pub struct RuleContext {

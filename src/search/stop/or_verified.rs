@@ -18,7 +18,7 @@
 //! its `verify.top_k` model fits, about half a millisecond each); a search
 //! with no tile left, or extracted whole, has the vote rule alone.
 
-use super::{LeaderCheck, Needs, StopRule, VoteStats};
+use super::{LeaderCheck, Needs, StopRule, VoteStats, check_answer};
 use crate::search::Voted;
 
 pub struct OrVerified {
@@ -73,21 +73,7 @@ impl StopRule for OrVerified {
         if !batch_end || voter.tally().total.is_some() {
             return None;
         }
-        let candidates: Vec<(u32, f32)> = voter
-            .top()
-            .iter()
-            .take(self.candidates)
-            .map(|&(h, id)| (id, h))
-            .collect();
-        let answer = leader_check?.answer(&candidates, voted)?;
-        answer.verified_at_scale(self.min_inliers).then(|| {
-            format!(
-                "answer {} verified at the query's scale: {} inliers ≥ {}, scale {:.2}",
-                answer.id,
-                answer.inliers,
-                self.min_inliers,
-                answer.scale.unwrap_or(0.0)
-            )
-        })
+        let checker = leader_check?;
+        check_answer(voter, voted, checker, self.candidates, self.min_inliers)?.1
     }
 }

@@ -456,49 +456,48 @@ fn verified_stops_on_the_checked_answer_at_the_query_scale_not_only_the_leader()
     };
     assert_eq!(verified_stop(8.0, &s, &mut c), None);
     assert_eq!(c.calls, 200);
-    // image 1 leads the votes, image 0 is second and verifies: with the
-    // top 4 handed to the check the answer is image 0, and the search stops
-    let map = one_word_per_image();
-    let view = map.view();
-    let context = RuleContext {
+    // image 1 leads the votes and image 0, second, verifies: with the top
+    // 4 handed to the check the answer is image 0 once it has a vote, and
+    // the search stops there; with the leader alone it never does
+    let s = [1u32, 1, 0, 1, 0, 1];
+    let top_4 = RuleContext {
         top_n: 4,
         ..RuleContext::default()
     };
-    let mut rule = spec("verified", 8.0).build(&context);
-    let mut voter = Voter::with_needs(&view, rule.needs());
     let mut c = FakeCheck {
         inliers: 8,
         calls: 0,
         scale: 1.1,
     };
-    let mut voted = Vec::new();
-    for (i, w) in [1u32, 1, 0].into_iter().enumerate() {
-        voter.vote(w, 0);
-        voted.push(Voted {
-            feature: i as u32,
-            word: w,
-            signature: 0,
-        });
-    }
-    assert_eq!(voter.tally().leader, Some(1));
-    let why = rule.check_with(&voter, &voted, Some(&mut c), true);
-    assert!(why.is_some_and(|w| w.starts_with("answer 0 verified")));
-    // with the leader alone handed to it, the same votes do not stop
-    let mut rule = spec("verified", 8.0).build(&RuleContext::default());
-    assert!(
-        rule.check_with(&voter, &voted, Some(&mut c), true)
-            .is_none()
-    );
+    let stop = stops_with_check_in(&spec("verified", 8.0), &s, Some(&mut c), &top_4);
+    assert_eq!(stop, Some(3));
+    let mut c = FakeCheck {
+        inliers: 8,
+        calls: 0,
+        scale: 1.1,
+    };
+    assert_eq!(verified_stop(8.0, &s, &mut c), None);
+    assert_eq!(c.calls, s.len());
 }
 
 fn stops_with_check(
     rule: &RuleSpec,
     stream: &[u32],
+    check: Option<&mut FakeCheck>,
+) -> Option<usize> {
+    stops_with_check_in(rule, stream, check, &RuleContext::default())
+}
+
+/// [`stops_with_check`] for a rule built in `context`.
+fn stops_with_check_in(
+    rule: &RuleSpec,
+    stream: &[u32],
     mut check: Option<&mut FakeCheck>,
+    context: &RuleContext,
 ) -> Option<usize> {
     let map = one_word_per_image();
     let view = map.view();
-    let mut rule_now = rule.build(&RuleContext::default());
+    let mut rule_now = rule.build(context);
     let mut voter = Voter::with_needs(&view, rule_now.needs());
     let mut voted = Vec::new();
     for (i, &w) in stream.iter().enumerate() {

@@ -21,9 +21,11 @@
 //! tile more. Inside a tile, where stopping saves quantization and votes but
 //! no extraction, it checks on a geometric schedule: once the features voted
 //! have grown by [`GROWTH`] since the last check, so a query is checked
-//! O(log N) times. A leader is not checked twice on the same votes.
+//! O(log N) times. The same votes are not checked twice.
 
-use super::{Grid, LeaderCheck, Needs, Parameter, Range, RuleInfo, StopRule, VoteStats};
+use super::{
+    Grid, LeaderCheck, Needs, Parameter, Range, RuleInfo, StopRule, VoteStats, check_answer,
+};
 use crate::search::Voted;
 
 pub const INFO: RuleInfo = RuleInfo {
@@ -43,7 +45,7 @@ pub const INFO: RuleInfo = RuleInfo {
         Ok(Box::new(Verified {
             min_inliers: m as usize,
             candidates: context.top_n.max(1),
-            checked: None,
+            checked_at: None,
             inliers: None,
         }))
     },
@@ -56,8 +58,8 @@ pub const GROWTH: f64 = 1.5;
 struct Verified {
     min_inliers: usize,
     candidates: usize,
-    /// The leader and the feature count of the last check.
-    checked: Option<(u32, usize)>,
+    /// The features voted at the last check.
+    checked_at: Option<usize>,
     /// Inliers of the last check.
     inliers: Option<usize>,
 }
@@ -81,33 +83,17 @@ impl StopRule for Verified {
         leader_check: Option<&mut dyn LeaderCheck>,
         batch_end: bool,
     ) -> Option<String> {
-        let t = voter.tally();
-        let leader = t.leader?;
+        let features = voter.tally().features;
         let checker = leader_check?;
-        if self.checked == Some((leader, t.features)) {
-            return None;
-        }
-        if !batch_end
-            && let Some((_, at)) = self.checked
-            && (t.features as f64) < at as f64 * GROWTH
+        if let Some(at) = self.checked_at
+            && (features == at || !batch_end && (features as f64) < at as f64 * GROWTH)
         {
             return None;
         }
-        self.checked = Some((leader, t.features));
-        let candidates: Vec<(u32, f32)> = voter
-            .top()
-            .iter()
-            .take(self.candidates)
-            .map(|&(h, id)| (id, h))
-            .collect();
-        let answer = checker.answer(&candidates, voted)?;
+        let (answer, why) = check_answer(voter, voted, checker, self.candidates, self.min_inliers)?;
+        self.checked_at = Some(features);
         self.inliers = Some(answer.inliers);
-        answer.verified_at_scale(self.min_inliers).then(|| {
-            format!(
-                "answer {} verified at the query's scale: {} inliers ≥ {}",
-                answer.id, answer.inliers, self.min_inliers
-            )
-        })
+        why
     }
 
     /// A geometric rule: the coarse pass is checked as any tile.
