@@ -353,6 +353,10 @@ pub struct VerifyArgs {
     /// Iteration cap of the robust estimator.
     #[arg(long, default_value_t = VerifyParams::default().max_iters)]
     pub fit_iters: u32,
+    /// The rules `verified` and `or_verified` stop only on an answer whose
+    /// inliers show the scene within e^±this of the query's scale.
+    #[arg(long, default_value_t = VerifyParams::default().stop_log_scale)]
+    pub stop_log_scale: f32,
 }
 
 impl VerifyArgs {
@@ -368,6 +372,7 @@ impl VerifyArgs {
             estimator: self.estimator,
             threshold_px: self.inlier_px,
             max_iters: self.fit_iters,
+            stop_log_scale: self.stop_log_scale,
             ..VerifyParams::default()
         };
         p.validate().map_err(anyhow::Error::msg)?;

@@ -248,6 +248,10 @@ impl<C: search::LeaderCheck> search::LeaderCheck for CpuTimed<C> {
         self.spent += started.elapsed();
         answer
     }
+
+    fn max_log_scale(&self) -> f32 {
+        self.inner.max_log_scale()
+    }
 }
 
 #[cfg(test)]

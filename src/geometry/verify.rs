@@ -200,6 +200,11 @@ pub struct VerifyParams {
     pub threshold_px: f64,
     pub confidence: f64,
     pub max_iters: u32,
+    /// The geometric stops (`verified`, `or_verified`) stop only on an
+    /// answer whose inliers show the scene at the query's scale: spread at
+    /// most e^this times more or less in the map image than in the query
+    /// (docs/results.md, "The verified stop at the query's scale").
+    pub stop_log_scale: f32,
 }
 
 impl Default for VerifyParams {
@@ -222,6 +227,7 @@ impl Default for VerifyParams {
             threshold_px: 8.0,
             confidence: 0.995,
             max_iters: 500,
+            stop_log_scale: crate::search::stop::MAX_LOG_SCALE,
         }
     }
 }
@@ -259,6 +265,12 @@ impl VerifyParams {
         }
         if self.max_iters == 0 {
             return Err("max_iters must be at least 1".into());
+        }
+        if !(self.stop_log_scale.is_finite() && self.stop_log_scale >= 0.0) {
+            return Err(format!(
+                "stop_log_scale must be a number of at least 0, got {}",
+                self.stop_log_scale
+            ));
         }
         Ok(())
     }
@@ -437,6 +449,10 @@ impl LeaderCheck for LeaderVerifier<'_> {
             inliers: r.inliers(),
             scale: relative_scale(&r.inlier_pairs),
         })
+    }
+
+    fn max_log_scale(&self) -> f32 {
+        self.params.stop_log_scale
     }
 }
 

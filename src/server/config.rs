@@ -836,6 +836,7 @@ mod tests {
             ("[verify]\ntop_k = 0\n", "top_k"),
             ("[verify]\nmodel = \"affine\"\n", "model"),
             ("[verify]\nconfidence = 1.5\n", "confidence"),
+            ("[verify]\nstop_log_scale = -0.1\n", "stop_log_scale"),
             (
                 "[search]\nquantizer = \"tree\"\ntree_probes = 0\n",
                 "tree_probes",

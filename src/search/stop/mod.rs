@@ -85,6 +85,13 @@ pub trait LeaderCheck {
     /// best first) verified and re-ranked as the final answer is, and its
     /// first. `None` without candidates.
     fn answer(&mut self, candidates: &[(u32, f32)], voted: &[Voted]) -> Option<CheckedAnswer>;
+
+    /// Largest |ln scale| of an answer at the query's scale
+    /// ([`CheckedAnswer::verified_at_scale`]): the verification's settings
+    /// say it, [`MAX_LOG_SCALE`] unless they do.
+    fn max_log_scale(&self) -> f32 {
+        MAX_LOG_SCALE
+    }
 }
 
 /// The first answer of a [`LeaderCheck::answer`].
@@ -98,21 +105,22 @@ pub struct CheckedAnswer {
     pub scale: Option<f32>,
 }
 
-/// Largest |ln scale| of an answer taken where the query was: its inliers
-/// spread at most e^0.2 ≈ 1.22 times more (or less) in the map image than
-/// in the query. Chosen on gardens-point with `scripts/tile-ends.sh`
-/// (docs/results.md, "A verified stop beside the rule").
+/// The default largest |ln scale| of an answer taken where the query was:
+/// its inliers spread at most e^0.2 ≈ 1.22 times more (or less) in the map
+/// image than in the query. Chosen on gardens-point with
+/// `scripts/tile-ends.sh` for `or_verified` (docs/results.md, "A verified
+/// stop beside the rule"); the verification's `stop_log_scale` setting.
 pub const MAX_LOG_SCALE: f32 = 0.2;
 
 impl CheckedAnswer {
     /// Verified with at least `min_inliers` inliers that show the scene at
-    /// the query's scale (within [`MAX_LOG_SCALE`]): an answer
+    /// the query's scale (|ln scale| at most `max_log_scale`): an answer
     /// taken where the query was, not a few steps before or after it.
-    pub fn verified_at_scale(&self, min_inliers: usize) -> bool {
+    pub fn verified_at_scale(&self, min_inliers: usize, max_log_scale: f32) -> bool {
         self.inliers >= min_inliers
             && self
                 .scale
-                .is_some_and(|s| s > 0.0 && s.ln().abs() <= MAX_LOG_SCALE)
+                .is_some_and(|s| s > 0.0 && s.ln().abs() <= max_log_scale)
     }
 }
 
@@ -135,14 +143,16 @@ fn check_answer(
         .map(|&(h, id)| (id, h))
         .collect();
     let answer = checker.answer(&top, voted)?;
-    let why = answer.verified_at_scale(min_inliers).then(|| {
-        format!(
-            "answer {} verified at the query's scale: {} inliers ≥ {min_inliers}, scale {:.2}",
-            answer.id,
-            answer.inliers,
-            answer.scale.unwrap_or(0.0)
-        )
-    });
+    let why = answer
+        .verified_at_scale(min_inliers, checker.max_log_scale())
+        .then(|| {
+            format!(
+                "answer {} verified at the query's scale: {} inliers ≥ {min_inliers}, scale {:.2}",
+                answer.id,
+                answer.inliers,
+                answer.scale.unwrap_or(0.0)
+            )
+        });
     Some((answer, why))
 }
 

@@ -9,7 +9,8 @@
 //! The scale matters: a map image taken a few steps before or after the query
 //! shares its geometry too (the scene smaller or larger in it), and such near
 //! misses are most of a route's wrong answers. An answer whose inliers show
-//! the scene at the query's scale, within [`MAX_LOG_SCALE`](super::MAX_LOG_SCALE), is one taken
+//! the scene at the query's scale, within the verification's `stop_log_scale`
+//! ([`MAX_LOG_SCALE`](super::MAX_LOG_SCALE) by default), is one taken
 //! where the query was.
 //!
 //! Stopping saves time only where it saves extraction, so the check runs at

@@ -480,10 +480,56 @@ fn verified_stops_on_the_checked_answer_at_the_query_scale_not_only_the_leader()
     assert_eq!(c.calls, s.len());
 }
 
+/// A [`FakeCheck`] whose verification settings bound the query's scale at
+/// `max_log_scale`.
+struct ScaleBound {
+    check: FakeCheck,
+    max_log_scale: f32,
+}
+
+impl LeaderCheck for ScaleBound {
+    fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize {
+        self.check.inliers(image, voted)
+    }
+
+    fn answer(&mut self, candidates: &[(u32, f32)], voted: &[Voted]) -> Option<CheckedAnswer> {
+        self.check.answer(candidates, voted)
+    }
+
+    fn max_log_scale(&self) -> f32 {
+        self.max_log_scale
+    }
+}
+
+#[test]
+fn the_checker_says_how_far_from_the_query_scale_a_geometric_stop_may_be() {
+    // ln 1.15 ≈ 0.14: within the default bound (0.2), not within 0.1
+    let s = [0u32; 50];
+    let check = |max_log_scale| ScaleBound {
+        check: FakeCheck {
+            inliers: 20,
+            calls: 0,
+            scale: 1.15,
+        },
+        max_log_scale,
+    };
+    for rule in [
+        spec("verified", 8.0),
+        spec("stable-peak", 1000.0).or_verified(Some(8.0)).unwrap(),
+    ] {
+        let mut c = check(MAX_LOG_SCALE);
+        assert_eq!(stops_with_check(&rule, &s, Some(&mut c)), Some(1), "{rule}");
+        let mut c = check(0.1);
+        assert_eq!(stops_with_check(&rule, &s, Some(&mut c)), None, "{rule}");
+        let mut c = check(0.5);
+        assert_eq!(stops_with_check(&rule, &s, Some(&mut c)), Some(1), "{rule}");
+    }
+}
+
 fn stops_with_check(
     rule: &RuleSpec,
     stream: &[u32],
-    check: Option<&mut FakeCheck>,
+    check: Option<&mut dyn LeaderCheck>,
 ) -> Option<usize> {
     stops_with_check_in(rule, stream, check, &RuleContext::default())
 }
@@ -492,7 +538,7 @@ fn stops_with_check(
 fn stops_with_check_in(
     rule: &RuleSpec,
     stream: &[u32],
-    mut check: Option<&mut FakeCheck>,
+    mut check: Option<&mut dyn LeaderCheck>,
     context: &RuleContext,
 ) -> Option<usize> {
     let map = one_word_per_image();
