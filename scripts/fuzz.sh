@@ -1,12 +1,16 @@
 #!/usr/bin/env bash
-# Fuzz the loading of vocabulary and map files, and the reading of a map's
-# change log, with cargo-fuzz (libFuzzer, AddressSanitizer). Usage:
-# scripts/fuzz.sh [SECONDS]   (default 60, split between the two targets: two
-# thirds to the files, one third to the log; CI uses a short budget, run
-# longer by hand, e.g. scripts/fuzz.sh 3600).
+# Fuzz the loading of vocabulary and map files, the reading of a map's change
+# log, and the decoding and extraction of uploaded images, with cargo-fuzz
+# (libFuzzer, AddressSanitizer). Usage:
+# scripts/fuzz.sh [SECONDS]   (default 60, split between the three targets:
+# half to the files, a sixth to the log, a third to the images; CI uses a
+# short budget, run longer by hand, e.g. scripts/fuzz.sh 3600).
 # The seed corpus of the files is a small real vocabulary and map built from
 # rtabmap-loop; that of the log, a log of one add and one removal written by
-# `bowloc map add|remove` on that map.
+# `bowloc map add|remove` on that map; that of the images, a small image in
+# each format the service decodes (fuzz/seeds/decode_image, written by
+# fuzz/seeds/generate.py) and the curl suite's unusual images
+# (tests/fixtures).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 secs=${1:-60}
@@ -36,7 +40,20 @@ if [ ! -f "$log_corpus/seed.changes" ]; then
   rm -rf "$tmp"
 fi
 # cargo-fuzz needs nightly flags; the stable toolchain accepts them with RUSTC_BOOTSTRAP.
-files_secs=$(( secs * 2 / 3 ))
-log_secs=$(( secs - files_secs ))
+image_corpus=fuzz/corpus/decode_image
+mkdir -p "$image_corpus"
+for seed in fuzz/seeds/decode_image/* tests/fixtures/*.jpg tests/fixtures/*.png tests/fixtures/*.gif; do
+  [ -e "$image_corpus/${seed##*/}" ] || cp "$seed" "$image_corpus/"
+done
+files_secs=$(( secs / 2 ))
+log_secs=$(( secs / 6 ))
+image_secs=$(( secs - files_secs - log_secs ))
 RUSTC_BOOTSTRAP=1 cargo fuzz run load_files "$corpus" -- -max_total_time="$files_secs" -rss_limit_mb=4096
 RUSTC_BOOTSTRAP=1 cargo fuzz run change_log "$log_corpus" -- -max_total_time="$log_secs" -rss_limit_mb=4096
+# The decoders report every damaged input on stderr (libjpeg's and libpng's
+# warnings, OpenCV's own unless its log level says otherwise); those lines
+# are dropped so that libFuzzer's report stays readable. The run's status is
+# the fuzzer's.
+decoder_noise='^(Corrupt JPEG data|Premature end of JPEG|Invalid SOS|Bogus|Unsupported marker|libpng (error|warning)|imdecode_|TIFF)'
+RUSTC_BOOTSTRAP=1 OPENCV_LOG_LEVEL=ERROR cargo fuzz run decode_image "$image_corpus" -- \
+  -max_total_time="$image_secs" -rss_limit_mb=4096 2>&1 | { grep -Ev "$decoder_noise" || true; }
