@@ -5,6 +5,7 @@ mod calibrate;
 mod eval;
 mod healthcheck;
 mod map;
+mod native_stderr;
 mod query;
 mod serve;
 mod shards;
@@ -14,6 +15,8 @@ use bowloc::server::config::LogFormat;
 use clap::{Parser, Subcommand, ValueEnum};
 use std::io::IsTerminal;
 use std::process::ExitCode;
+use std::sync::Arc;
+use tracing_subscriber::fmt::writer::BoxMakeWriter;
 
 #[derive(Parser)]
 #[command(
@@ -73,13 +76,14 @@ impl From<LogFormatArg> for LogFormat {
     }
 }
 
-/// Log to stderr, as text (coloured on a terminal) or as JSON lines.
-fn init_logging(filter: &str, format: LogFormat) {
+/// Log to `out` (stderr unless a server captures it), as text (coloured on
+/// a terminal) or as JSON lines.
+fn init_logging(filter: &str, format: LogFormat, out: BoxMakeWriter) {
     let filter = tracing_subscriber::EnvFilter::try_new(filter)
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr);
+        .with_writer(out);
     match format {
         LogFormat::Human => builder.with_ansi(std::io::stderr().is_terminal()).init(),
         LogFormat::Json => builder.json().flatten_event(true).init(),
@@ -95,11 +99,32 @@ pub fn run() -> ExitCode {
     }
     let result = match cli.command {
         Command::Serve(a) => serve::config(&a).and_then(|config| {
-            init_logging(&cli.log, config.server.log_format);
-            serve::run(config)
+            let format = config.server.log_format;
+            let stderr = || BoxMakeWriter::new(std::io::stderr);
+            // A JSON log takes the native libraries' stderr lines in as
+            // events, so that every line of it parses.
+            let (captured, out, refused) = match format {
+                LogFormat::Json => match native_stderr::capture() {
+                    Ok((guard, log)) => (Some(guard), BoxMakeWriter::new(Arc::new(log)), None),
+                    Err(e) => (None, stderr(), Some(e)),
+                },
+                LogFormat::Human => (None, stderr(), None),
+            };
+            init_logging(&cli.log, format, out);
+            if let Some(e) = refused {
+                tracing::warn!("the native libraries' messages stay on stderr: {e}");
+            }
+            let served = serve::run(config);
+            // stderr is itself again before an error is printed on it
+            drop(captured);
+            served
         }),
         command => {
-            init_logging(&cli.log, LogFormat::Human);
+            init_logging(
+                &cli.log,
+                LogFormat::Human,
+                BoxMakeWriter::new(std::io::stderr),
+            );
             match command {
                 Command::Vocab(c) => vocab::run(c),
                 Command::Map(c) => map::run(c),
