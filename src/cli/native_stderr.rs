@@ -12,13 +12,19 @@
 use std::fs::File;
 use std::io::{BufRead, BufReader, Error};
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
-use std::thread::JoinHandle;
+use std::sync::mpsc::{Receiver, channel};
+use std::time::Duration;
 
 /// Descriptor 2 captured until this is dropped.
 pub struct Captured {
     original: OwnedFd,
-    reader: Option<JoinHandle<()>>,
+    /// Says when the reader has logged the pipe's last line.
+    drained: Receiver<()>,
 }
+
+/// How long dropping a [`Captured`] waits for the reader to finish: a copy
+/// of the pipe's write end left open elsewhere must not hold the process.
+const DRAIN_WAIT: Duration = Duration::from_secs(1);
 
 /// Capture descriptor 2. Returns the guard and the original stderr, for the
 /// log to write to.
@@ -37,17 +43,15 @@ pub fn capture() -> Result<(Captured, File), Error> {
         return Err(Error::last_os_error());
     }
     drop(write);
+    let (done, drained) = channel();
     let reader = std::thread::Builder::new()
         .name("native-stderr".into())
-        .spawn(move || log_lines(File::from(read)));
+        .spawn(move || {
+            log_lines(File::from(read));
+            let _ = done.send(());
+        });
     match reader {
-        Ok(reader) => Ok((
-            Captured {
-                original,
-                reader: Some(reader),
-            },
-            log,
-        )),
+        Ok(_) => Ok((Captured { original, drained }, log)),
         Err(e) => {
             restore(&original);
             Err(e)
@@ -87,10 +91,8 @@ impl Drop for Captured {
     fn drop(&mut self) {
         // Once descriptor 2 no longer writes to the pipe, the reader reads
         // what is left and stops at its end.
-        if restore(&self.original)
-            && let Some(reader) = self.reader.take()
-        {
-            let _ = reader.join();
+        if restore(&self.original) {
+            let _ = self.drained.recv_timeout(DRAIN_WAIT);
         }
     }
 }
