@@ -23,17 +23,15 @@ fuzz_target!(|data: &[u8]| {
         max_side: 64,
         ..ExtractConfig::default()
     };
+    let grid: TileGrid = "2x2+8,coarse".parse().unwrap();
     for frame_side in [0, config.max_side] {
         let decoded = decode(data, limits, frame_side);
         // decoding refuses everything the header check refuses
         assert!(probed.is_ok() || decoded.is_err());
         let Ok(image) = decoded else { continue };
         let _ = extract(&image, &config);
-        let grid: TileGrid = "2x2+8,coarse".parse().unwrap();
         if let Ok(mut tiles) = Tiles::new(&image, &config, grid, Some((TileOrder::Richest, 7))) {
-            while let Some(tile) = tiles.next_tile() {
-                let _ = tile;
-            }
+            while tiles.next_tile().is_some() {}
         }
     }
 });

@@ -15,7 +15,6 @@ use bowloc::server::config::LogFormat;
 use clap::{Parser, Subcommand, ValueEnum};
 use std::io::IsTerminal;
 use std::process::ExitCode;
-use std::sync::Arc;
 use tracing_subscriber::fmt::writer::BoxMakeWriter;
 
 #[derive(Parser)]
@@ -100,18 +99,18 @@ pub fn run() -> ExitCode {
     let result = match cli.command {
         Command::Serve(a) => serve::config(&a).and_then(|config| {
             let format = config.server.log_format;
-            let stderr = || BoxMakeWriter::new(std::io::stderr);
             // A JSON log takes the native libraries' stderr lines in as
             // events, so that every line of it parses.
-            let (captured, out, refused) = match format {
-                LogFormat::Json => match native_stderr::capture() {
-                    Ok((guard, log)) => (Some(guard), BoxMakeWriter::new(Arc::new(log)), None),
-                    Err(e) => (None, stderr(), Some(e)),
-                },
-                LogFormat::Human => (None, stderr(), None),
+            let captured = match format {
+                LogFormat::Json => Some(native_stderr::capture()),
+                LogFormat::Human => None,
+            };
+            let out = match &captured {
+                Some(Ok(c)) => c.log_writer(),
+                _ => BoxMakeWriter::new(std::io::stderr),
             };
             init_logging(&cli.log, format, out);
-            if let Some(e) = refused {
+            if let Some(Err(e)) = &captured {
                 tracing::warn!("the native libraries' messages stay on stderr: {e}");
             }
             let served = serve::run(config);
