@@ -61,8 +61,44 @@ fn summary(images: &[Vec<u8>]) {
             median(&runs.iter().map(|r| r.1 as f64).collect::<Vec<_>>())
         );
     }
+    contrast_thresholds(images);
     thread_layouts(images, &config(640));
     tile_plans(images, &config(640));
+}
+
+/// SIFT's contrast threshold at max side 640: a lower one keeps weaker
+/// keypoints, more features for verification to match, at a cost. Each image
+/// goes through every threshold in turn, so the ratios compare them under the
+/// same load.
+fn contrast_thresholds(images: &[Vec<u8>]) {
+    let thresholds = [0.04, 0.03, 0.02, 0.01];
+    let configs: Vec<ExtractConfig> = thresholds
+        .iter()
+        .map(|&t| {
+            let mut c = config(640);
+            c.sift.contrast_threshold = t;
+            c
+        })
+        .collect();
+    // per threshold, per image: (ms, features)
+    let mut runs = vec![Vec::new(); configs.len()];
+    for image in images {
+        for (c, r) in configs.iter().zip(&mut runs) {
+            r.push(extract_ms(image, c));
+        }
+    }
+    let base = &runs[0];
+    for (t, r) in thresholds.iter().zip(&runs) {
+        let ratio = |f: &dyn Fn(usize) -> f64| median(&(0..r.len()).map(f).collect::<Vec<_>>());
+        eprintln!(
+            "contrast_threshold {t:.2} (max_side 640): median {:.1} ms per image ({:.2}× 0.04's), \
+             median {} features ({:.2}×)",
+            median(&r.iter().map(|x| x.0).collect::<Vec<_>>()),
+            ratio(&|i| r[i].0 / base[i].0),
+            median(&r.iter().map(|x| x.1 as f64).collect::<Vec<_>>()),
+            ratio(&|i| r[i].1 as f64 / base[i].1.max(1) as f64),
+        );
+    }
 }
 
 /// Streaming extraction plans against the whole image, image by image.

@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# SIFT's contrast threshold against recall and the verified stop, on both
+# shared maps: for each threshold, `bowloc eval` (3 vocabulary seeds × 3
+# feature orders, verification on) of the full search and the `verified`
+# rule, then one line per threshold with the features per query, recall@1 per
+# vocabulary seed without and with verification, recall top-1 @90 %
+# precision (by distinctness, verified) per seed, and the share of the
+# features the verified stop used. Time is not compared here: each threshold
+# is a separate run; `cargo bench --bench extract` prices the thresholds in
+# one run.
+#
+#   scripts/contrast-check.sh                 # 0.04 (the default) 0.03 0.02 0.01
+#   CONTRAST="0.04 0.03" scripts/contrast-check.sh
+#
+# Caches: data/eval-cache/contrast/DATASET-T; results: data/eval/contrast/DATASET-T.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bin=./target/release/bowloc
+[ -x "$bin" ] || cargo build --release --quiet
+thresholds=${CONTRAST:-0.04 0.03 0.02 0.01}
+for spec in gardens-point:5000 rtabmap-loop:1000; do
+  dataset=${spec%%:*} words=${spec##*:}
+  for t in $thresholds; do
+    out=data/eval/contrast/$dataset-$t
+    "$bin" --log warn eval --dataset "../shared/datasets/$dataset" --words "$words" \
+      --runs 3 --vocab-seeds 3 --verify --rules none --set verified=8 \
+      --tile-order random --contrast-threshold "$t" --no-plots \
+      --cache "data/eval-cache/contrast/$dataset-$t" --out "$out" > /dev/null
+    python3 - "$out/results.json" "$t" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+rows = {s["label"]: s for s in d["settings"]}
+def seeds(label, key):
+    return " / ".join(f"{v * 100:.1f}" for v in rows[label][key]["per_seed"])
+print(
+    f"{d['dataset']['name']} K={d['vocabularies'][0]['words']} contrast {sys.argv[2]}: "
+    f"{d['dataset']['mean_features']:.0f} features per query (median {d['dataset']['median_features']})\n"
+    f"  full search recall@1 {seeds('none', 'recall_at_1')}, "
+    f"verified {seeds('none +verify', 'recall_at_1')}; "
+    f"verified recall top-1 @90%P {seeds('none +verify', 'recall90_top1_distinct')}\n"
+    f"  verified 8 stop: {rows['verified 8 +verify']['fraction']['mean'] * 100:.1f} % of the features, "
+    f"recall@1 {seeds('verified 8 +verify', 'recall_at_1')}"
+)
+PY
+  done
+done
