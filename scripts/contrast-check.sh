@@ -2,10 +2,12 @@
 # SIFT's contrast threshold against recall and the verified stop, on both
 # shared maps: for each threshold, `bowloc eval` (3 vocabulary seeds × 3
 # feature orders, verification on) of the full search and the `verified`
-# rule, then one line per threshold with the features per query, recall@1 per
-# vocabulary seed without and with verification, recall top-1 @90 %
-# precision (by distinctness, verified) per seed, and the share of the
-# features the verified stop used. Time is not compared here: each threshold
+# rule and the default rule (place-z 2 or verified 12, warm-up 20), then per
+# threshold: the features per query, the full search's recall@1 per
+# vocabulary seed without and with verification and its recall top-1 @90 %
+# precision (by distinctness, verified) per seed, the share of the features
+# the verified stop used and its recall@1, and the default rule's recall@1,
+# recall top-1 @90 % precision and share of the features. Time is not compared here: each threshold
 # is a separate run; `cargo bench --bench extract` prices the thresholds in
 # one run.
 #
@@ -23,13 +25,14 @@ for spec in gardens-point:5000 rtabmap-loop:1000; do
   for t in $thresholds; do
     out=data/eval/contrast/$dataset-$t
     "$bin" --log warn eval --dataset "../shared/datasets/$dataset" --words "$words" \
-      --runs 3 --vocab-seeds 3 --verify --rules none --set verified=8 \
+      --runs 3 --vocab-seeds 3 --verify --rules none --set verified=8 --set place-z=2+verified=12@20 \
       --tile-order random --contrast-threshold "$t" --no-plots \
       --cache "data/eval-cache/contrast/$dataset-$t" --out "$out" > /dev/null
     python3 - "$out/results.json" "$t" <<'PY'
 import json, sys
 d = json.load(open(sys.argv[1]))
 rows = {s["label"]: s for s in d["settings"]}
+default = "place-z 2 or verified 12 w=20 +verify"
 def seeds(label, key):
     return " / ".join(f"{v * 100:.1f}" for v in rows[label][key]["per_seed"])
 print(
@@ -39,7 +42,10 @@ print(
     f"verified {seeds('none +verify', 'recall_at_1')}; "
     f"verified recall top-1 @90%P {seeds('none +verify', 'recall90_top1_distinct')}\n"
     f"  verified 8 stop: {rows['verified 8 +verify']['fraction']['mean'] * 100:.1f} % of the features, "
-    f"recall@1 {seeds('verified 8 +verify', 'recall_at_1')}"
+    f"recall@1 {seeds('verified 8 +verify', 'recall_at_1')}\n"
+    f"  default rule: {rows[default]['fraction']['mean'] * 100:.1f} % of the features, "
+    f"recall@1 {seeds(default, 'recall_at_1')}, "
+    f"recall top-1 @90%P {seeds(default, 'recall90_top1_distinct')}"
 )
 PY
   done
