@@ -5,13 +5,13 @@ mod calibrate;
 mod eval;
 mod healthcheck;
 mod map;
-mod native_stderr;
 mod query;
 mod serve;
 mod shards;
 mod vocab;
 
 use bowloc::server::config::LogFormat;
+use bowloc::server::native_stderr;
 use clap::{Parser, Subcommand, ValueEnum};
 use std::io::IsTerminal;
 use std::process::ExitCode;

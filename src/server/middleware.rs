@@ -2,7 +2,8 @@
 //! client or generated, and echoed back), one log line per request with its
 //! id, route, status, latency and fraction of features used, the per-route
 //! request metrics, the header limits (a JSON 431), and turning a panic in a
-//! handler into a JSON 500.
+//! handler into a JSON 500. A handler finds its request's id with
+//! [`request_id`].
 
 use super::errors::ApiError;
 use super::localize::LocalizeSummary;
@@ -16,6 +17,16 @@ use std::time::Instant;
 use tracing::Instrument;
 
 pub const REQUEST_ID: HeaderName = HeaderName::from_static("x-request-id");
+
+tokio::task_local! {
+    /// The id of the request the task is answering.
+    static CURRENT_ID: String;
+}
+
+/// The id of the request this task is answering, if it is one.
+pub fn request_id() -> Option<String> {
+    CURRENT_ID.try_with(String::clone).ok()
+}
 
 /// Log and count one request.
 pub async fn observe(request: Request, next: Next) -> Response {
@@ -35,7 +46,9 @@ pub async fn observe(request: Request, next: Next) -> Response {
     metrics::in_flight(1.0);
     let _in_flight = InFlight;
     let span = tracing::info_span!("request", id = %id);
-    let response = next.run(request).instrument(span).await;
+    let response = CURRENT_ID
+        .scope(id.clone(), next.run(request).instrument(span))
+        .await;
     let elapsed = started.elapsed();
     let status = response.status().as_u16();
     metrics::request(&route, method.as_str(), status, elapsed);

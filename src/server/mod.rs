@@ -20,6 +20,8 @@
 //! - [`workers`]: the bounded pool for CPU work;
 //! - [`errors`]: error answers as JSON;
 //! - [`middleware`]: request ids, request logs and metrics, panics;
+//! - [`native_stderr`]: with a JSON log, what the native libraries write to
+//!   stderr, logged as events tied to the requests that caused them;
 //! - [`metrics`], [`openapi`], [`proto`]: the exported metrics, the API
 //!   document and the protobuf answer.
 
@@ -31,6 +33,7 @@ pub mod images;
 pub mod localize;
 pub mod metrics;
 pub mod middleware;
+pub mod native_stderr;
 pub mod openapi;
 pub mod page;
 pub mod proto;
@@ -173,6 +176,14 @@ impl AppState {
         job: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
     ) -> Result<T, ApiError> {
         use workers::PoolError;
+        // The job logs in its request's span, and what the native libraries
+        // write to stderr meanwhile is tied to its request.
+        let span = tracing::Span::current();
+        let request_id = middleware::request_id();
+        let job = move || {
+            let _native = request_id.as_deref().map(native_stderr::section);
+            span.in_scope(job)
+        };
         self.pool
             .run(Some(tokio::time::Instant::from_std(deadline)), job)
             .await

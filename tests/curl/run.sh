@@ -790,20 +790,23 @@ fi
 
 # --- a JSON log: every line parses, the decoders' messages included ----------
 # libpng writes its complaint about a damaged PNG to stderr itself; with
-# log_format = "json" the server logs it as an event (target `native`).
+# log_format = "json" the server logs it as an event (target `native`),
+# tied to the request whose job was running.
 write_config "$TMP/json.toml" 1 4 10000
 sed -i 's/^log_format = "human"/log_format = "json"/' "$TMP/json.toml"
 if start_server "$TMP/json.toml" "$TMP/json.log"; then
   ok "server with a JSON log starts"
   head -c 1000 "$ROOT/tests/fixtures/rgba.png" >"$TMP/cut.png"
   expect "PNG cut short, JSON log" 422 undecodable_image -H 'Content-Type: image/png' \
-    --data-binary @"$TMP/cut.png" "$BASE/localize"
+    -H 'x-request-id: cut-png-7' --data-binary @"$TMP/cut.png" "$BASE/localize"
   kill -TERM "$PID"; wait "$PID"
   every_line_parses() { jq -e . "$1" >/dev/null 2>&1; }
   native_libpng() { jq -s -e 'any(.[]; .target == "native" and .level == "WARN" and (.message | startswith("libpng")))' "$1" >/dev/null; }
   check "every line of the JSON log parses ($(wc -l <"$TMP/json.log") lines)" every_line_parses "$TMP/json.log"
   check "libpng's own message is in it as a warning, target native ($(jq -r 'select(.target == "native") | .message' "$TMP/json.log" | head -1))" \
     native_libpng "$TMP/json.log"
+  native_request() { jq -s -e 'any(.[]; .target == "native" and (.message | startswith("libpng")) and .request_id == "cut-png-7")' "$1" >/dev/null; }
+  check "libpng's message names the request that caused it (request_id cut-png-7)" native_request "$TMP/json.log"
 else
   fail "server with a JSON log starts"
 fi
