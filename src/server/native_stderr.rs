@@ -101,7 +101,7 @@ pub fn section(request_id: &str) -> Section {
         .filter(char::is_ascii_graphic)
         .take(MAX_ID)
         .collect();
-    write_line(&format!("{MARK}+{number} {id}\n"));
+    write_line(&format!("\n{MARK}+{number} {id}\n"));
     Section {
         number: Some(number),
     }
@@ -110,13 +110,15 @@ pub fn section(request_id: &str) -> Section {
 impl Drop for Section {
     fn drop(&mut self) {
         if let Some(number) = self.number {
-            write_line(&format!("{MARK}-{number}\n"));
+            write_line(&format!("\n{MARK}-{number}\n"));
         }
     }
 }
 
 /// Write `line` to descriptor 2 in one call (a marker is far under
-/// `PIPE_BUF`, so no other write splits it).
+/// `PIPE_BUF`, so no other write splits it). A marker starts with a newline
+/// of its own, so that it starts a line even after a library's message that
+/// did not end one (the empty line this may leave is not logged).
 fn write_line(line: &str) {
     // SAFETY: the buffer is valid for its length; descriptor 2 is open.
     unsafe { libc::write(2, line.as_ptr().cast(), line.len()) };
@@ -229,6 +231,24 @@ mod tests {
         assert_eq!(s.read("\u{1e}-8"), Read::Nothing);
         assert_eq!(s.read("   "), Read::Nothing);
         assert_eq!(s.read("last"), message("last", ""));
+    }
+
+    #[test]
+    fn a_marker_after_an_unfinished_line_is_still_read_as_one() {
+        let mut s = Sections::default();
+        let pipe = "\n\u{1e}+1 abc\nlibpng error: no newline\n\u{1e}-1\nlater\n";
+        let read: Vec<Read> = pipe.split('\n').map(|line| s.read(line)).collect();
+        assert_eq!(
+            read,
+            [
+                Read::Nothing,
+                Read::Nothing,
+                message("libpng error: no newline", "abc"),
+                Read::Nothing,
+                message("later", ""),
+                Read::Nothing,
+            ]
+        );
     }
 
     #[test]
