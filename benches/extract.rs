@@ -71,7 +71,8 @@ fn summary(images: &[Vec<u8>]) {
 /// goes through every threshold in turn, so the ratios compare them under the
 /// same load.
 fn contrast_thresholds(images: &[Vec<u8>]) {
-    let thresholds = [0.04, 0.03, 0.02, 0.01];
+    let default = config(640).sift.contrast_threshold;
+    let thresholds = [default, 0.03, 0.02, 0.01];
     let configs: Vec<ExtractConfig> = thresholds
         .iter()
         .map(|&t| {
@@ -89,16 +90,20 @@ fn contrast_thresholds(images: &[Vec<u8>]) {
     }
     let base = &runs[0];
     for (t, r) in thresholds.iter().zip(&runs) {
-        let ratio = |f: &dyn Fn(usize) -> f64| median(&(0..r.len()).map(f).collect::<Vec<_>>());
         eprintln!(
-            "contrast_threshold {t:.2} (max_side 640): median {:.1} ms per image ({:.2}× 0.04's), \
+            "contrast_threshold {t:.2} (max_side 640): median {:.1} ms per image ({:.2}× {default}'s), \
              median {} features ({:.2}×)",
             median(&r.iter().map(|x| x.0).collect::<Vec<_>>()),
-            ratio(&|i| r[i].0 / base[i].0),
+            median_ratio(r.len(), |i| r[i].0 / base[i].0),
             median(&r.iter().map(|x| x.1 as f64).collect::<Vec<_>>()),
-            ratio(&|i| r[i].1 as f64 / base[i].1.max(1) as f64),
+            median_ratio(r.len(), |i| r[i].1 as f64 / base[i].1.max(1) as f64),
         );
     }
+}
+
+/// The median over images `0..n` of a per-image ratio.
+fn median_ratio(n: usize, ratio: impl Fn(usize) -> f64) -> f64 {
+    median(&(0..n).map(ratio).collect::<Vec<_>>())
 }
 
 /// Streaming extraction plans against the whole image, image by image.
@@ -133,7 +138,7 @@ fn tile_plans(images: &[Vec<u8>], c: &ExtractConfig) {
     }
     let whole = &measured[0];
     for (plan, m) in plans.iter().zip(&measured) {
-        let ratio = |f: &dyn Fn(usize) -> f64| median(&(0..m.len()).map(f).collect::<Vec<_>>());
+        let ratio = |f: &dyn Fn(usize) -> f64| median_ratio(m.len(), f);
         eprintln!(
             "plan {plan:<14}: full extraction {:.2}× the whole image's CPU time ({:.1} ms), \
              keypoints {:.3}×; first unit {:.2}× of the whole image's time for {:.2} of the plan's keypoints \

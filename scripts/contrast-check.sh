@@ -1,15 +1,15 @@
 #!/usr/bin/env bash
 # SIFT's contrast threshold against recall and the verified stop, on both
-# shared maps: for each threshold, `bowloc eval` (3 vocabulary seeds × 3
-# feature orders, verification on) of the full search and the `verified`
-# rule and the default rule (place-z 2 or verified 12, warm-up 20), then per
-# threshold: the features per query, the full search's recall@1 per
-# vocabulary seed without and with verification and its recall top-1 @90 %
-# precision (by distinctness, verified) per seed, the share of the features
-# the verified stop used and its recall@1, and the default rule's recall@1,
-# recall top-1 @90 % precision and share of the features. Time is not compared here: each threshold
-# is a separate run; `cargo bench --bench extract` prices the thresholds in
-# one run.
+# shared maps. For each threshold, `bowloc eval` (3 vocabulary seeds × 3
+# feature orders, verification on) of the full search, the `verified` rule
+# and the default rule (place-z 2 or verified 12, warm-up 20), then:
+# the features per query; the full search's recall@1 per vocabulary seed
+# without and with verification, and its recall top-1 @90 % precision (by
+# distinctness, verified); the verified stop's share of the features and its
+# recall@1; the default rule's share of the features, recall@1 and recall
+# top-1 @90 % precision. Time is not compared here: each threshold is a
+# separate run; `cargo bench --bench extract` prices the thresholds in one
+# run.
 #
 #   scripts/contrast-check.sh                 # 0.04 (the default) 0.03 0.02 0.01
 #   CONTRAST="0.04 0.03" scripts/contrast-check.sh

@@ -89,8 +89,8 @@ pub struct Section {
     number: Option<u64>,
 }
 
-/// Open a section for the request `request_id` (at most 200 of its
-/// printable ASCII characters are kept).
+/// Open a section for the request `request_id` (its printable ASCII
+/// characters, cut to a bounded length).
 pub fn section(request_id: &str) -> Section {
     if !CAPTURING.load(Ordering::SeqCst) {
         return Section { number: None };
@@ -130,7 +130,10 @@ enum Read<'a> {
     /// A marker or an empty line: nothing to log.
     Nothing,
     /// A library's line, and the requests whose jobs were running.
-    Message { text: &'a str, requests: String },
+    Message {
+        text: &'a str,
+        requests: Vec<String>,
+    },
 }
 
 /// The sections open at the point the reader has reached in the pipe.
@@ -156,10 +159,9 @@ impl Sections {
         if text.is_empty() {
             return Read::Nothing;
         }
-        let requests: Vec<&str> = self.open.values().map(String::as_str).collect();
         Read::Message {
             text,
-            requests: requests.join(","),
+            requests: self.open.values().cloned().collect(),
         }
     }
 }
@@ -173,10 +175,10 @@ fn log_lines(pipe: PipeReader) {
         let Read::Message { text, requests } = sections.read(&line) else {
             continue;
         };
-        match sections.open.len() {
-            0 => tracing::warn!(target: "native", "{text}"),
-            1 => tracing::warn!(target: "native", request_id = %requests, "{text}"),
-            _ => tracing::warn!(target: "native", request_ids = %requests, "{text}"),
+        match requests.as_slice() {
+            [] => tracing::warn!(target: "native", "{text}"),
+            [one] => tracing::warn!(target: "native", request_id = %one, "{text}"),
+            many => tracing::warn!(target: "native", request_ids = %many.join(","), "{text}"),
         }
     }
 }
@@ -202,10 +204,10 @@ impl Drop for Captured {
 mod tests {
     use super::*;
 
-    fn message<'a>(text: &'a str, requests: &str) -> Read<'a> {
+    fn message<'a>(text: &'a str, requests: &[&str]) -> Read<'a> {
         Read::Message {
             text,
-            requests: requests.into(),
+            requests: requests.iter().map(|r| r.to_string()).collect(),
         }
     }
 
@@ -214,23 +216,23 @@ mod tests {
         let mut s = Sections::default();
         assert_eq!(
             s.read("before any request\n"),
-            message("before any request", "")
+            message("before any request", &[])
         );
         assert_eq!(s.read("\u{1e}+7 abc-1\n"), Read::Nothing);
         assert_eq!(
             s.read("libpng error: cut\n"),
-            message("libpng error: cut", "abc-1")
+            message("libpng error: cut", &["abc-1"])
         );
         assert_eq!(s.read("\u{1e}+8 def-2"), Read::Nothing);
         assert_eq!(
             s.read("Corrupt JPEG data"),
-            message("Corrupt JPEG data", "abc-1,def-2")
+            message("Corrupt JPEG data", &["abc-1", "def-2"])
         );
         assert_eq!(s.read("\u{1e}-7"), Read::Nothing);
-        assert_eq!(s.read("after"), message("after", "def-2"));
+        assert_eq!(s.read("after"), message("after", &["def-2"]));
         assert_eq!(s.read("\u{1e}-8"), Read::Nothing);
         assert_eq!(s.read("   "), Read::Nothing);
-        assert_eq!(s.read("last"), message("last", ""));
+        assert_eq!(s.read("last"), message("last", &[]));
     }
 
     #[test]
@@ -243,9 +245,9 @@ mod tests {
             [
                 Read::Nothing,
                 Read::Nothing,
-                message("libpng error: no newline", "abc"),
+                message("libpng error: no newline", &["abc"]),
                 Read::Nothing,
-                message("later", ""),
+                message("later", &[]),
                 Read::Nothing,
             ]
         );
