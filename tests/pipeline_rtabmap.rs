@@ -196,7 +196,7 @@ fn cli_reports_bad_input_clearly() {
         "--rule",
         "relative",
     ]);
-    assert!(!ok && err.contains("needs a threshold"), "{err}");
+    assert!(!ok && err.contains("needs its threshold"), "{err}");
 
     // truncated and corrupted map files name the file
     let full = std::fs::read(d.join("m.bowmap")).unwrap();

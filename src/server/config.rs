@@ -827,7 +827,7 @@ mod tests {
             ("[limits]\nheaders = 0\n", "limits.headers"),
             ("[limits]\nheader_bytes = 100\n", "limits.header_bytes"),
             ("[search]\nrule = \"fastest\"\n", "fastest"),
-            ("[search]\nrule = \"fixed\"\n", "needs a fraction"),
+            ("[search]\nrule = \"fixed\"\n", "needs its fraction"),
             (
                 "[search]\nrule = \"none\"\nthreshold = 0.5\n",
                 "takes no parameter",

@@ -914,7 +914,7 @@ mod tests {
                 "invalid_parameter",
                 "min_features",
             ),
-            ("rule=relative", "invalid_parameter", "needs a threshold"),
+            ("rule=relative", "invalid_parameter", "needs its threshold"),
             (
                 "rule=none&threshold=1",
                 "invalid_parameter",

@@ -378,7 +378,10 @@ impl RuleSpec {
             (None, None) => 0.0,
             (None, Some(_)) => return Err(format!("rule `{name}` takes no parameter")),
             (Some(p), None) => {
-                return Err(format!("rule `{name}` needs a {} ({})", p.name, p.meaning));
+                return Err(format!(
+                    "rule `{name}` needs its {} ({})",
+                    p.name, p.meaning
+                ));
             }
             (Some(p), Some(v)) => p.range.check(p.name, v)?,
         };
@@ -504,7 +507,7 @@ pub fn parse_rule(name: &str, given: &[(&str, f64)]) -> Result<RuleSpec, RuleErr
             if what != p.name && what != GENERIC_PARAMETER {
                 return Err(RuleError {
                     parameter: Some(what.to_owned()),
-                    message: format!("rule `{name}` takes a {}, not a {what}", p.name),
+                    message: format!("rule `{name}` takes `{}`, not `{what}`", p.name),
                 });
             }
             Some(v)

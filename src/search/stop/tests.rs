@@ -255,9 +255,15 @@ fn parameters_are_parsed_the_same_way_everywhere() {
     assert!(
         err("peak-mean", &[("delta", 0.1)])
             .message
-            .contains("takes a threshold")
+            .contains("takes `threshold`, not `delta`")
     );
-    assert!(err("relative", &[]).message.contains("needs a threshold"));
+    assert!(err("relative", &[]).message.contains("needs its threshold"));
+    assert!(err("verified", &[]).message.contains("needs its inliers"));
+    assert!(
+        err("verified", &[("epsilon", 0.1)])
+            .message
+            .contains("takes `inliers`, not `epsilon`")
+    );
     assert!(
         err("relative", &[("threshold", 1.0), ("delta", 0.1)])
             .message
