@@ -16,9 +16,9 @@ run() { # name, then eval arguments
     "$B" eval --no-plots --verify --out "$OUT/$name" "$@" 2>/dev/null | grep -v '^recommended' | grep -v 'results.md$'
 }
 for S in 1 2 3; do
-    run "gp-k5000-seed$S" --dataset $D/gardens-point --words 5000 --vocab-seeds "$S" \
+    run "gp-k5000-seed$S" --dataset $D/gardens-point --words 5000 --vocab-seeds "$S,$S" \
         --rules none --set fixed=0.3 --runs 3 --cache data/eval-cache/gardens-point
-    run "rtab-k1000-seed$S" --dataset $D/rtabmap-loop --words 1000 --vocab-seeds "$S" \
+    run "rtab-k1000-seed$S" --dataset $D/rtabmap-loop --words 1000 --vocab-seeds "$S,$S" \
         --rules none --set fixed=0.1 --set fixed=0.3 --runs 3 --cache data/eval-cache/rtabmap-loop
 done
 [ -n "${SEEDS_ONLY:-}" ] && exit 0
