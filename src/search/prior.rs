@@ -19,8 +19,10 @@
 
 use std::cmp::Ordering;
 
-/// Evidence weight κ used when none is configured (per unit of summed vote).
-pub const DEFAULT_KAPPA: f64 = 2.0;
+/// Evidence weight κ used when none is configured (per unit of summed vote):
+/// chosen on gardens-point with Hamming-weighted votes (docs/results.md,
+/// "Sequences").
+pub const DEFAULT_KAPPA: f64 = 6.0;
 /// Images a posterior keeps when none is configured.
 pub const DEFAULT_KEEP: usize = 64;
 
