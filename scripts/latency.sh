@@ -23,6 +23,10 @@
 # The breakdown is printed for the first seed's map.
 # LATENCY_PLAN: the configured extraction plan (search.tiles), e.g.
 # "2x2+24,auto"; default the configuration's default.
+# LATENCY_SEQUENCE=1: the default's requests are the frames of a sequence
+# (`sequence=…&frame=N`, N the query's line; one sequence per pass), so the
+# sequence filter's stop (`sequence.rule`) decides where they stop; the full
+# search is sent alone, as before.
 # The server learns the coarse pass (`tiles = "…,auto"`) from the first
 # requests, as it does in service: every request counts.
 set -euo pipefail
@@ -51,15 +55,24 @@ tiles = \"$LATENCY_PLAN\"}
 src=../shared/datasets/$name
 median() { sort -g | awk '{v[NR] = $1} END {print v[int((NR + 1) / 2)]}'; }
 col() { cut -f"$1" "$tmp/rows" | median; }
-queries() { awk -v e="$every" 'NR % e == 1 || e == 1' $src/queries.txt; }
+# "LINE PATH" of each query used
+queries() { awk -v e="$every" 'NR % e == 1 || e == 1 {print NR, $0}' $src/queries.txt; }
+# the default's extra query string for query line $1 of pass $2 (seed $3)
+asked() {
+  local q=$extra
+  if [ -n "${LATENCY_SEQUENCE:-}" ]; then
+    q="${q:+$q&}sequence=latency-$3-$2&frame=$1"
+  fi
+  echo "${q:+&$q}"
+}
 
 # Where the default configuration's request time goes (one map).
 breakdown() {
   : >"$tmp/rows"
   for pass in 1 2 3; do
-    queries | while read -r q; do
+    queries | while read -r n q; do
       client=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
-        --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass${extra:+&$extra}")
+        --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass$(asked "$n" "$pass" breakdown)")
       jq -r --arg c "$client" '[($c | tonumber) * 1000, .timings_ms.decode, .timings_ms.extract,
         .timings_ms.quantize, .timings_ms.vote, .timings_ms.total, .features.fraction,
         (.timings_ms.verify // 0), (if .verified == null then "no" else "yes" end)] | @tsv' \
@@ -80,11 +93,11 @@ breakdown() {
 compare() {
   : >"$tmp/pairs"
   for pass in 1 2 3; do
-    queries | while read -r q; do
+    queries | while read -r n q; do
       full=$(curl -s -o /dev/null -w '%{time_total}' -H 'Content-Type: image/jpeg' \
         --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass&rule=none&tiles=1x1")
       default=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
-        --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass${extra:+&$extra}")
+        --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass$(asked "$n" "$pass" "$1")")
       tiles=$(jq -r '"\(.tiles.extracted)/\(.tiles.total)\t\(.tiles.grid)"' "$tmp/answer.json")
       printf '%s\t%s\t%s\n' "$full" "$default" "$tiles" >>"$tmp/pairs"
     done
@@ -96,7 +109,7 @@ compare() {
   tiles=$(awk -F'\t' '{split($3, t, "/"); s += t[1] / t[2]} END {printf "%.3f", s / NR}' "$tmp/pairs")
   coarse=$(awk -F'\t' '$4 ~ /coarse/ {c++} END {printf "%d of %d", c, NR}' "$tmp/pairs")
   ratio=$(awk -v a="$default_ms" -v b="$full_ms" 'BEGIN {printf "%.3f", a / b}')
-  echo "vocabulary seed $1: full search, whole image: median ${full_ms} ms; default${extra:+ ($extra)}, streaming: median ${default_ms} ms"
+  echo "vocabulary seed $1: full search, whole image: median ${full_ms} ms; default${extra:+ ($extra)}${LATENCY_SEQUENCE:+ as the frames of a sequence}, streaming: median ${default_ms} ms"
   echo "vocabulary seed $1: ratio of medians $ratio; median per-query ratio ${per_query}; mean share of tiles extracted ${tiles}; coarse pass first in ${coarse} requests"
   echo "$1 $ratio $per_query" >>"$tmp/ratios"
 }

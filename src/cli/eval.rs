@@ -217,6 +217,7 @@ fn sequence(a: EvalArgs, name: String, seeds: Vec<u64>) -> anyhow::Result<()> {
         model: a.model.model()?,
         stop: stop.rule,
         min_features: stop.min_features,
+        verify: a.verify.params()?,
         inject: a.inject,
         injections: a.injections,
         command: std::env::args().collect::<Vec<_>>().join(" "),

@@ -523,10 +523,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     // Geometric verification as the service does it: for the `verified`
     // stop always, for re-ranking in the `+verify` settings.
     let verify_params = config.verify.clone().unwrap_or_default();
-    let geometry = std::sync::Arc::new(tiles::Geometry {
-        fit: Box::new(crate::features::fit::OpenCvFit::new(verify_params.fit())),
-        params: verify_params.clone(),
-    });
+    let geometry = tiles::Geometry::shared(&verify_params);
     let quantize = |set: &cache::DescriptorSet, v: &Vocabulary, what: String| {
         let (queries, costs) = quantize_queries(set, v, &what);
         SeedWords { queries, costs }

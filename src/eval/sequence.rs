@@ -22,7 +22,8 @@
 //! a match again (1: the first frame after it).
 
 use super::cache;
-use super::tiles::Query;
+use super::tiles::{Geometry, Query};
+use crate::geometry::verify::VerifyParams;
 use super::{maps_of, quantize_queries, vocabularies};
 use crate::dataset::{Dataset, image_list};
 use crate::features::{ExtractConfig, TileGrid};
@@ -54,6 +55,9 @@ pub struct SequenceEvalConfig {
     pub stop: RuleSpec,
     /// Its warm-up.
     pub min_features: usize,
+    /// How a rule with a geometric check (`or_verified`, `verified`)
+    /// verifies, as the service does.
+    pub verify: VerifyParams,
     /// Unrelated images (a list or a folder) to inject.
     pub inject: Option<PathBuf>,
     /// How many to inject, evenly spaced.
@@ -313,14 +317,19 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
             min_features: config.min_features,
         },
     ];
+    let geometry = Geometry::shared(&config.verify);
     let mut per_mode: Vec<Vec<ModeSeed>> = vec![Vec::new(); modes.len()];
     for (v, map) in vocabs.iter().zip(&maps) {
         let seed = v.meta().seed;
-        let (queries, _) = quantize_queries(&query_desc, v, &format!("quantizing (seed {seed})"));
-        let injected: Vec<Query> = match &inject_desc {
+        let (mut queries, _) =
+            quantize_queries(&query_desc, v, &format!("quantizing (seed {seed})"));
+        let mut injected: Vec<Query> = match &inject_desc {
             Some(d) => quantize_queries(d, v, "quantizing injected images").0,
             None => Vec::new(),
         };
+        for q in queries.iter_mut().chain(injected.iter_mut()) {
+            q.geometry = Some(geometry.clone());
+        }
         let jobs: Vec<(usize, u32)> = (0..modes.len())
             .flat_map(|m| (0..config.runs).map(move |r| (m, r)))
             .collect();

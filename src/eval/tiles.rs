@@ -57,6 +57,16 @@ pub struct Geometry {
     pub params: VerifyParams,
 }
 
+impl Geometry {
+    /// OpenCV's fit with `params`, to be shared by every query.
+    pub fn shared(params: &VerifyParams) -> Arc<Self> {
+        Arc::new(Self {
+            fit: Box::new(crate::features::fit::OpenCvFit::new(params.fit())),
+            params: params.clone(),
+        })
+    }
+}
+
 /// What replaying one search gave.
 pub struct Replay {
     pub outcome: SearchOutcome,
