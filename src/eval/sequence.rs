@@ -23,10 +23,10 @@
 
 use super::cache;
 use super::tiles::{Geometry, Query};
-use crate::geometry::verify::VerifyParams;
 use super::{maps_of, quantize_queries, vocabularies};
 use crate::dataset::{Dataset, image_list};
 use crate::features::{ExtractConfig, TileGrid};
+use crate::geometry::verify::VerifyParams;
 use crate::index::MapIndex;
 use crate::search::{RuleSpec, SearchOptions};
 use crate::sequence::{Filter, SequenceModel, Topology, TopologyKind};
