@@ -58,6 +58,76 @@ pub fn auto_warmup(counts: &[usize]) -> usize {
     share.min(MAX_WARMUP)
 }
 
+/// A warm-up as asked for: a number of features, or `auto` ([`auto_warmup`]
+/// of the feature counts at hand: the queries' in an evaluation, the map
+/// images' in a sequence's rule). In a configuration file, `"auto"` or a
+/// number.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "WarmupValue", into = "WarmupValue")]
+pub enum Warmup {
+    Auto,
+    Features(usize),
+}
+
+impl Warmup {
+    /// The number of features, `auto` being `auto`.
+    pub fn resolve(self, auto: usize) -> usize {
+        match self {
+            Self::Auto => auto,
+            Self::Features(n) => n,
+        }
+    }
+}
+
+impl std::str::FromStr for Warmup {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim() {
+            "auto" => Ok(Self::Auto),
+            n => n
+                .parse()
+                .map(Self::Features)
+                .map_err(|_| format!("`{s}` is neither a number of features nor `auto`")),
+        }
+    }
+}
+
+impl std::fmt::Display for Warmup {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Auto => f.write_str("auto"),
+            Self::Features(n) => write!(f, "{n}"),
+        }
+    }
+}
+
+/// A warm-up as a configuration file writes it.
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
+enum WarmupValue {
+    Features(usize),
+    Text(String),
+}
+
+impl TryFrom<WarmupValue> for Warmup {
+    type Error = String;
+    fn try_from(v: WarmupValue) -> Result<Self, String> {
+        match v {
+            WarmupValue::Features(n) => Ok(Self::Features(n)),
+            WarmupValue::Text(s) => s.parse(),
+        }
+    }
+}
+
+impl From<Warmup> for WarmupValue {
+    fn from(w: Warmup) -> Self {
+        match w {
+            Warmup::Auto => Self::Text("auto".into()),
+            Warmup::Features(n) => Self::Features(n),
+        }
+    }
+}
+
 /// A calibration map and its pseudo-queries.
 pub struct PseudoQueries {
     pub map: MapIndex,

@@ -305,3 +305,65 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
     let md = std::fs::read_to_string(out3.join("results.md")).unwrap();
     assert!(md.contains("% started coarse"), "{md}");
 }
+
+#[test]
+fn a_sequence_eval_warms_up_as_the_service_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let inject = common::dataset("rtabmap-loop").join("map.txt");
+    let sequence = |name: &str, stop: &str| {
+        let out = dir.path().join(name);
+        let o = run_eval(
+            &out,
+            &cache,
+            &[
+                "--sequence",
+                "--runs",
+                "1",
+                "--injections",
+                "2",
+                "--inject",
+                inject.to_str().unwrap(),
+                "--stop",
+                stop,
+            ],
+        );
+        (o, out)
+    };
+    // a warm-up that is neither fails before any work
+    let (o, _) = sequence("bad", "posterior=0.7@soon");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        stderr.contains("neither a number of features nor `auto`"),
+        "{stderr}"
+    );
+    assert!(!cache.exists(), "{stderr}");
+    let report = |out: &Path| -> Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join("sequence.json")).unwrap()).unwrap()
+    };
+    // `auto`: a quarter of the map images' median feature count, at most 100
+    let (o, out) = sequence("auto", "posterior=0.7@auto");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let auto = report(&out);
+    let w = auto["min_features"].as_u64().unwrap();
+    assert!(w > 0 && w < 100, "rtabmap-loop's small frames: {w}");
+    let modes = auto["modes"].as_array().unwrap();
+    let row = |filter: bool, stopped: bool| {
+        modes
+            .iter()
+            .find(|m| m["filter"] == filter && (m["rule"] != "full") == stopped)
+            .unwrap_or_else(|| panic!("no mode filter={filter} stopped={stopped}"))
+    };
+    assert_eq!(
+        row(true, true)["rule"],
+        format!("posterior (epsilon 0.7) w={w}")
+    );
+    // the filter's stop reads fewer features than its full search
+    let features = |m: &Value| m["features"]["mean"].as_f64().unwrap();
+    assert!(features(row(true, true)) < features(row(true, false)));
+    // a number is taken as it is
+    let (o, out) = sequence("fixed", "posterior=0.7@40");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(report(&out)["min_features"], 40);
+}

@@ -592,3 +592,30 @@ async fn the_auto_plan_tries_the_coarse_pass_and_learns_which_costs_less() {
     let answer: serde_json::Value = serde_json::from_slice(&body).unwrap();
     assert_eq!(answer["tiles"]["grid"], "3x3+16");
 }
+
+#[tokio::test]
+async fn a_frame_of_a_sequence_warms_up_as_the_map_images_say() {
+    // the map's 12 images: a quarter of their median feature count, at most 100
+    let (_, m) = files();
+    let map = bowloc::index::MapIndex::open(m, true).unwrap();
+    let counts: Vec<usize> = (0..map.images() as u32)
+        .map(|j| map.geometry(j).len())
+        .collect();
+    let auto = bowloc::calibrate::auto_warmup(&counts);
+    assert!(
+        auto > 0 && auto < 100,
+        "rtabmap-loop's small frames: {auto}"
+    );
+    let warm_up = |config: Config, sequence: &'static str| async move {
+        let state = state_with(true, config);
+        let q = format!("seed=3&sequence={sequence}&frame=0&trace=true");
+        let (status, _, body) = send(&state, localize(&q, "application/json")).await;
+        assert_eq!(status, StatusCode::OK);
+        let json: serde_json::Value = serde_json::from_slice(&body).unwrap();
+        json["trace"]["warm_up"].as_u64().unwrap() as usize
+    };
+    assert_eq!(warm_up(Config::default(), "auto").await, auto);
+    let mut config = Config::default();
+    config.sequence.min_features = bowloc::calibrate::Warmup::Features(7);
+    assert_eq!(warm_up(config, "fixed").await, 7);
+}

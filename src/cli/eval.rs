@@ -2,8 +2,9 @@
 //! layout (tables, CSV, JSON and plots in `--out`).
 
 use super::args::{ExtractArgs, SequenceArgs, VerifyArgs, dataset_name, place_window, vocab_seeds};
+use bowloc::calibrate::Warmup;
 use bowloc::eval::machine::OpenCvInfo;
-use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig, Warmup};
+use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig};
 use bowloc::features::TilePlan;
 use bowloc::search::SearchOptions;
 use clap::Args;
@@ -89,8 +90,11 @@ pub struct EvalArgs {
     #[arg(long)]
     sequence: bool,
     /// With --sequence: the stopping rule of the stopped modes, RULE=VALUE or
-    /// RULE=VALUE@WARMUP.
-    #[arg(long, default_value = "posterior=0.01")]
+    /// RULE=VALUE@WARMUP, the warm-up a number of features or `auto` (a
+    /// quarter of the map images' median feature count, at most 100, as the
+    /// service's `sequence.min_features = "auto"`). The default is the
+    /// service's.
+    #[arg(long, default_value = "posterior=0.7@auto")]
     stop: String,
     /// With --sequence: unrelated images to inject into the sequence (a list or a folder).
     #[arg(long)]
@@ -193,7 +197,16 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
 
 /// `bowloc eval --sequence`.
 fn sequence(a: EvalArgs, name: String, seeds: Vec<u64>) -> anyhow::Result<()> {
-    let stop = eval::sweep::parse_setting(&a.stop, 0)
+    // the warm-up may be `auto`, which only the map resolves
+    let (body, warmup) = match a.stop.rsplit_once('@') {
+        Some((body, w)) => (
+            body,
+            w.parse::<Warmup>()
+                .map_err(|e| anyhow::anyhow!("--stop {}: warm-up: {e}", a.stop))?,
+        ),
+        None => (a.stop.as_str(), Warmup::Features(0)),
+    };
+    let stop = eval::sweep::parse_setting(body, 0)
         .map_err(|e| anyhow::anyhow!("--stop {}: {e}", a.stop))?;
     anyhow::ensure!(
         !a.tiles.learn_coarse,
@@ -216,7 +229,7 @@ fn sequence(a: EvalArgs, name: String, seeds: Vec<u64>) -> anyhow::Result<()> {
             .unwrap_or_else(|| PathBuf::from("data/eval-cache").join(&name)),
         model: a.model.model()?,
         stop: stop.rule,
-        min_features: stop.min_features,
+        min_features: warmup,
         verify: a.verify.params()?,
         inject: a.inject,
         injections: a.injections,

@@ -39,7 +39,7 @@ pub mod tiles;
 pub mod timing;
 pub mod verify;
 
-use crate::calibrate::{auto_warmup, median_features};
+use crate::calibrate::{Warmup, auto_warmup, median_features};
 use crate::dataset::Dataset;
 use crate::features::{ExtractConfig, TileGrid, TilePlan};
 use crate::index::MapIndex;
@@ -66,45 +66,6 @@ const HISTOGRAM_BINS: usize = 20;
 
 /// Default calibration targets: mean fraction of features used.
 pub const DEFAULT_TARGETS: &[f64] = &[0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95];
-
-/// A warm-up as asked for: a number of features, or `auto`
-/// ([`auto_warmup`] of the queries' feature counts).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Warmup {
-    Auto,
-    Features(usize),
-}
-
-impl Warmup {
-    pub fn resolve(self, auto: usize) -> usize {
-        match self {
-            Self::Auto => auto,
-            Self::Features(n) => n,
-        }
-    }
-}
-
-impl std::str::FromStr for Warmup {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s.trim() {
-            "auto" => Ok(Self::Auto),
-            n => n
-                .parse()
-                .map(Self::Features)
-                .map_err(|_| format!("`{s}` is neither a number of features nor `auto`")),
-        }
-    }
-}
-
-impl std::fmt::Display for Warmup {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::Auto => f.write_str("auto"),
-            Self::Features(n) => write!(f, "{n}"),
-        }
-    }
-}
 
 /// What to evaluate and where.
 #[derive(Debug, Clone)]

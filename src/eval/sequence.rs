@@ -24,6 +24,7 @@
 use super::cache;
 use super::tiles::{Geometry, Query};
 use super::{maps_of, quantize_queries, vocabularies};
+use crate::calibrate::{Warmup, auto_warmup};
 use crate::dataset::{Dataset, image_list};
 use crate::features::{ExtractConfig, TileGrid};
 use crate::geometry::verify::VerifyParams;
@@ -53,8 +54,9 @@ pub struct SequenceEvalConfig {
     pub model: SequenceModel,
     /// The stopping rule of the `STOP` modes.
     pub stop: RuleSpec,
-    /// Its warm-up.
-    pub min_features: usize,
+    /// Its warm-up (`auto`: [`crate::calibrate::auto_warmup`] of the map
+    /// images' feature counts, as the service resolves it).
+    pub min_features: Warmup,
     /// How a rule with a geometric check (`or_verified`, `verified`)
     /// verifies, as the service does.
     pub verify: VerifyParams,
@@ -279,6 +281,11 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
     let vocabs = vocabularies(&config.cache, config.words, &config.seeds, None, &map_desc)?;
     let maps = maps_of(&config.cache, &vocabs, &map_desc, &dataset.name)?;
     crate::features::set_opencv_threads(1);
+    // every seed's map holds the same images with the same features
+    let map_counts: Vec<usize> = (0..map_desc.len())
+        .map(|j| map_desc.image(j).map_or(0, |d| d.nrows()))
+        .collect();
+    let min_features = config.min_features.resolve(auto_warmup(&map_counts));
 
     // the sequence: queries in order, injections evenly spaced
     let n = dataset.queries.len();
@@ -304,7 +311,7 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
         Mode {
             filter: false,
             rule: config.stop.clone(),
-            min_features: config.min_features,
+            min_features,
         },
         Mode {
             filter: true,
@@ -314,7 +321,7 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
         Mode {
             filter: true,
             rule: config.stop.clone(),
-            min_features: config.min_features,
+            min_features,
         },
     ];
     let geometry = Geometry::shared(&config.verify);
@@ -415,7 +422,7 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
         words: config.words,
         tiles: config.tiles.to_string(),
         model: config.model,
-        min_features: config.min_features,
+        min_features,
         modes: reports,
     };
     std::fs::create_dir_all(&config.out)

@@ -11,6 +11,7 @@
 //! then in the map ([`super::compact`]).
 
 use super::log::{Change, NewImage, Record};
+use crate::calibrate::auto_warmup;
 use crate::geometry::packed::PackedFeature;
 use crate::index::build::weigh;
 use crate::index::metadata::pose_of;
@@ -79,6 +80,8 @@ pub struct Snapshot {
     /// The base's meta, counting the images now in the map.
     meta: MapMeta,
     generation: u64,
+    /// [`Self::auto_warmup`], computed on first use (a change clears it).
+    auto_warmup: OnceLock<usize>,
 }
 
 impl Snapshot {
@@ -93,6 +96,7 @@ impl Snapshot {
             added_names: imbl::HashMap::new(),
             meta,
             base,
+            auto_warmup: OnceLock::new(),
         }
     }
 
@@ -161,6 +165,15 @@ impl Snapshot {
         }
     }
 
+    /// The warm-up `auto` means on this map: [`auto_warmup`] of its images'
+    /// feature counts (a map of small frames gets a short one).
+    pub fn auto_warmup(&self) -> usize {
+        *self.auto_warmup.get_or_init(|| {
+            let counts: Vec<usize> = self.ids().map(|j| self.features_of(j)).collect();
+            auto_warmup(&counts)
+        })
+    }
+
     /// Apply one change (not yet durable: the caller logs it first or is
     /// replaying the log), at the record's generation. `max_images` caps the
     /// map's size. On error nothing changes.
@@ -171,6 +184,7 @@ impl Snapshot {
         };
         self.generation = record.generation;
         self.meta.generation = record.generation;
+        self.auto_warmup = OnceLock::new();
         Ok(applied)
     }
 

@@ -482,3 +482,21 @@ fn positions_run_over_the_id_range_with_added_images() {
     assert!(plain.positions().is_none());
     assert!(!plain.each_position(&mut |_, _| panic!("no positions")));
 }
+
+#[test]
+fn the_auto_warm_up_follows_the_images_in_the_map() {
+    // 30 file images of 40 features: a quarter of the median
+    let s = scenario();
+    let mut snapshot = Snapshot::new(Arc::new(file_map(&s.file)));
+    assert_eq!(snapshot.auto_warmup(), 10);
+    // 40 larger images added: the median moves to theirs, the cap holds
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    for k in 0..40 {
+        let record = Record {
+            generation: k + 1,
+            change: Change::Add(new_image(&format!("big{k}"), &random_words(&mut rng, 600))),
+        };
+        snapshot.apply(&record, usize::MAX).unwrap();
+    }
+    assert_eq!(snapshot.auto_warmup(), crate::calibrate::MAX_WARMUP);
+}

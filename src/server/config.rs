@@ -53,8 +53,9 @@ pub struct SequenceConfig {
     /// Rule of a frame that names none (its parameter in `threshold`).
     pub rule: String,
     pub threshold: Option<f64>,
-    /// Warm-up of that rule.
-    pub min_features: usize,
+    /// Warm-up of that rule: a number of features, or `auto`
+    /// ([`crate::calibrate::auto_warmup`] of the map images' feature counts).
+    pub min_features: crate::calibrate::Warmup,
     /// Evidence weight κ: votes h(j) after t features count as κ·h(j)/√t.
     pub kappa: f64,
     /// Map images each sequence's belief tracks.
@@ -81,7 +82,7 @@ impl Default for SequenceConfig {
             topology: TopologyKind::Auto,
             rule: "posterior".into(),
             threshold: Some(0.7),
-            min_features: 100,
+            min_features: crate::calibrate::Warmup::Auto,
             kappa: m.kappa,
             track: m.track,
             max_gap: m.max_gap,
@@ -719,6 +720,22 @@ mod tests {
     fn shipped_file_equals_the_built_in_defaults() {
         let text = std::fs::read_to_string(shipped()).unwrap();
         assert_eq!(load_str(&text, &[]).unwrap(), Config::default());
+    }
+
+    #[test]
+    fn a_sequence_warm_up_is_auto_or_a_number_of_features() {
+        use crate::calibrate::Warmup;
+        let warmup = |toml: &str, env: &[(&str, &str)]| {
+            load_str(&format!("[sequence]\n{toml}"), env).map(|c| c.sequence.min_features)
+        };
+        assert_eq!(warmup("", &[]), Ok(Warmup::Auto));
+        assert_eq!(warmup("min_features = 40", &[]), Ok(Warmup::Features(40)));
+        assert_eq!(warmup("min_features = \"auto\"", &[]), Ok(Warmup::Auto));
+        let env = [("BOWLOC_SEQUENCE__MIN_FEATURES", "60")];
+        assert_eq!(warmup("", &env), Ok(Warmup::Features(60)));
+        let e = warmup("min_features = \"soon\"", &[]).unwrap_err();
+        assert!(e.contains("neither a number of features nor `auto`"), "{e}");
+        assert!(warmup("min_features = -3", &[]).is_err());
     }
 
     #[test]

@@ -598,6 +598,7 @@ pub async fn localize(
     let sequence = params.sequence()?;
     let frame = params.frame()?;
     let near = params.near()?;
+    let snapshot = localizer.map.snapshot();
     let mut defaults = std::borrow::Cow::Borrowed(&state.defaults);
     if sequence.is_some() && !params.names_a_rule() {
         // a frame of a sequence stops by the sequence's rule
@@ -606,7 +607,7 @@ pub async fn localize(
         d.options.rule = q
             .rule()
             .map_err(|e| ApiError::internal(format!("sequence.rule: {e}")))?;
-        d.options.min_features = q.min_features;
+        d.options.min_features = q.min_features.resolve(snapshot.auto_warmup());
     }
     let mut options = params.options(&defaults)?;
     let asked = params.tiles()?;
@@ -616,7 +617,6 @@ pub async fn localize(
     let tracing = params.tracing()?;
     options.deadline = Some(deadline);
     let model = state.config.sequence.model();
-    let snapshot = localizer.map.snapshot();
     let allowed = match near {
         Some(n) => Some(n.images(&*snapshot).ok_or_else(|| {
             ApiError::invalid_parameter("near", "the map has no poses with fields x and y")
