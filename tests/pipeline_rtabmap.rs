@@ -327,3 +327,55 @@ fn streaming_plans_find_the_whole_images_keypoints() {
         }
     }
 }
+
+#[test]
+fn query_sequence_frames_stop_by_the_sequence_rule_after_the_maps_warm_up() {
+    let common::RealMap { vocab, map, .. } = common::real_map("rtabmap-loop", 1000);
+    let counts: Vec<usize> = (0..map.images() as u32)
+        .map(|j| map.geometry(j).len())
+        .collect();
+    let warm_up = bowloc::calibrate::auto_warmup(&counts) as u64;
+    assert!(warm_up > 0 && warm_up < 100, "small frames: {warm_up}");
+    let dir = tempfile::tempdir().unwrap();
+    let (v, m) = (dir.path().join("v.bowvoc"), dir.path().join("m.bowmap"));
+    vocab.save(&v).unwrap();
+    map.save(&m).unwrap();
+    let rtab = common::dataset("rtabmap-loop");
+    let frames: Vec<String> = (41..=46)
+        .map(|i| rtab.join(format!("images/{i}.jpg")).display().to_string())
+        .collect();
+    let answers = |extra: &[&str]| -> Vec<serde_json::Value> {
+        let out = bowloc()
+            .args(["query", "--vocab", v.to_str().unwrap(), "--map"])
+            .arg(&m)
+            .args(["--sequence", "--seed", "1"])
+            .args(extra)
+            .args(&frames)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let mut stopped_early = 0;
+    for a in answers(&[]) {
+        assert_eq!(a["rule"]["name"], "posterior", "{a}");
+        let at = a["stop"]["at_feature"].as_u64().unwrap();
+        let total = a["features"]["total"].as_u64().unwrap();
+        // never before the warm-up, unless the frame has fewer features
+        assert!(at >= warm_up.min(total), "{at} < {warm_up}");
+        stopped_early += (at < total) as u32;
+    }
+    assert!(
+        stopped_early > 0,
+        "the sequence's rule never stopped a frame"
+    );
+    // a rule named is the one used
+    for a in answers(&["--rule", "none"]) {
+        assert_eq!(a["rule"]["name"], "none");
+        assert_eq!(a["stop"]["at_feature"], a["features"]["total"], "{a}");
+    }
+}

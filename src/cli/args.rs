@@ -3,7 +3,7 @@
 use bowloc::features::{ExtractConfig, SiftParams};
 use bowloc::geometry::verify::{Estimator, Model, Order, VerifyParams};
 use bowloc::search::stop::{GENERIC_PARAMETER, RULES, parse_rule};
-use bowloc::search::{SearchOptions, TileOrder};
+use bowloc::search::{RuleSpec, SearchOptions, TileOrder};
 use bowloc::sequence::{Motion, SequenceModel};
 use clap::Args;
 use clap::builder::{PossibleValue, PossibleValuesParser};
@@ -99,9 +99,10 @@ fn rule_parser() -> PossibleValuesParser {
 /// the registry's parser, as the service's query string does.
 #[derive(Args, Debug, Clone)]
 pub struct SearchArgs {
-    /// Stopping rule.
-    #[arg(long, value_parser = rule_parser(), default_value = SearchOptions::RECOMMENDED_RULE)]
-    pub rule: String,
+    /// Stopping rule. Default: the service's, place-z (with `query
+    /// --sequence`, the sequence's: posterior).
+    #[arg(long, value_parser = rule_parser())]
+    pub rule: Option<String>,
     /// The rule's parameter, whatever its name (T of peak-mean, relative and
     /// stable-peak; also δ, f or m). Default: the recommended value when the
     /// rule is the recommended one.
@@ -133,9 +134,11 @@ pub struct SearchArgs {
     /// Features quantized per batch.
     #[arg(long, default_value_t = SearchOptions::recommended().block)]
     pub block: usize,
-    /// Features voted before the rule is consulted (the warm-up).
-    #[arg(long, default_value_t = SearchOptions::recommended().min_features)]
-    pub min_features: usize,
+    /// Features voted before the rule is consulted (the warm-up). Default:
+    /// 20 (with `query --sequence` and its rule, the sequence's: `auto`, a
+    /// quarter of the map images' median feature count, at most 100).
+    #[arg(long)]
+    pub min_features: Option<usize>,
     /// Drop candidates scoring below this.
     #[arg(long, default_value_t = SearchOptions::recommended().min_score)]
     pub min_score: f32,
@@ -169,13 +172,27 @@ impl SearchArgs {
         .collect()
     }
 
+    /// The search asked for, the service's defaults for what is not.
     pub fn options(&self) -> anyhow::Result<SearchOptions> {
         let recommended = SearchOptions::recommended();
+        self.options_over(&recommended.rule, recommended.min_features)
+    }
+
+    /// The search asked for, with `default_rule` and its warm-up
+    /// `default_warmup` when no rule or parameter is given.
+    pub fn options_over(
+        &self,
+        default_rule: &RuleSpec,
+        default_warmup: usize,
+    ) -> anyhow::Result<SearchOptions> {
+        let recommended = SearchOptions::recommended();
         let given = self.given();
-        let rule = if given.is_empty() && self.rule == recommended.rule.name {
-            recommended.rule.clone()
+        let name = self.rule.as_deref().unwrap_or(&default_rule.name);
+        let the_default = given.is_empty() && name == default_rule.name;
+        let rule = if the_default {
+            default_rule.clone()
         } else {
-            parse_rule(&self.rule, &given).map_err(|e| match e.parameter {
+            parse_rule(name, &given).map_err(|e| match e.parameter {
                 Some(p) if p != "rule" => anyhow::anyhow!("--{p}: {}", e.message),
                 _ => anyhow::anyhow!("--rule: {}", e.message),
             })?
@@ -192,7 +209,11 @@ impl SearchArgs {
             top_n: self.top_n,
             seed: self.seed.unwrap_or_else(bowloc::report::draw_seed),
             block: self.block,
-            min_features: self.min_features,
+            min_features: self.min_features.unwrap_or(if the_default {
+                default_warmup
+            } else {
+                recommended.min_features
+            }),
             min_score: self.min_score,
             min_distinct: self.min_distinct,
             deadline: None,

@@ -32,7 +32,8 @@ pub struct QueryArgs {
     verify: VerifyArgs,
     /// Run the images, in the order given, as the frames of one camera
     /// through the sequence filter (each answer's `sequence` has the filtered
-    /// candidates).
+    /// candidates); frames stop by the service's sequence rule unless
+    /// `--rule` or a parameter is given.
     #[arg(long)]
     sequence: bool,
     #[command(flatten)]
@@ -43,9 +44,17 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     let mut localizer = Localizer::open(&a.vocab, &a.map, true)?;
     localizer.tiles = TileGrid::DEFAULT;
     localizer.set_verify(a.verify.params()?);
-    let options = a.search.options()?;
     let model = a.model.model()?;
     let snapshot = localizer.map.snapshot();
+    let options = if a.sequence {
+        // the frames stop by the sequence's rule, as the service's do
+        let sequence = bowloc::server::config::SequenceConfig::default();
+        let rule = sequence.rule().map_err(anyhow::Error::msg)?;
+        let warmup = sequence.min_features.resolve(snapshot.auto_warmup());
+        a.search.options_over(&rule, warmup)?
+    } else {
+        a.search.options()?
+    };
     let topology = Topology::of(
         TopologyKind::Auto,
         snapshot.id_range(),
