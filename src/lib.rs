@@ -13,7 +13,10 @@
 //!   matrix multiply.
 //! - [`vocabulary`] — the visual words (k-means centroids) and their training,
 //!   and the Hamming embedding that signs each feature within its word.
-//! - [`geometry`] — keypoints as plain numbers (position, size, angle).
+//! - [`geometry`] — keypoints as plain numbers (position, size, angle), the
+//!   word pairs between a query and a map image, and the verification that
+//!   re-ranks candidates by inliers (its model fit is OpenCV's, behind a
+//!   trait implemented in [`features`]).
 //! - [`index`] — the map: a tf-idf inverted index over the map's images, and
 //!   each map feature's word, keypoint and signature.
 //! - [`live`] — live maps: images added and removed while serving, a
@@ -34,8 +37,9 @@
 //! - [`server`] — the HTTP service (`bowloc serve`): routes, configuration,
 //!   bounded worker pool, metrics, OpenAPI document, protobuf answers.
 //!
-//! The algorithmic core (`quantize`, `vocabulary`, `index`, `search`, `sequence`) has no
-//! OpenCV or HTTP types; front ends (`cli`, `server`) live at the edges.
+//! The algorithmic core (`quantize`, `vocabulary`, `index`, `search`,
+//! `geometry`, `sequence`) has no OpenCV or HTTP types; front ends (`cli`,
+//! `server`) live at the edges.
 
 pub mod calibrate;
 pub mod dataset;
