@@ -362,7 +362,7 @@ pub struct VerifyArgs {
     /// Order of the verified candidates.
     #[arg(long, default_value_t = VerifyParams::default().order, value_parser = verify_order_parser())]
     pub verify_order: Order,
-    /// Geometric model: homography or fundamental.
+    /// Geometric model: homography, fundamental, similarity or affine (the last two by RANSAC whatever the estimator).
     #[arg(long, default_value = "homography")]
     pub model: Model,
     /// Robust estimator: ransac or magsac.

@@ -129,7 +129,13 @@ pub fn markdown(report: &VerificationReport) -> String {
          query in ms.\n\n\
          | setting | verify | recall@1 | recall@5 | recall top-1 @90% P | recall top-1 @90% P by distinctness | recall top-5 @90% P | verify ms median | p95 | top verified | verified top correct |\n\
          | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
-        p.top_k, p.model, p.estimator, p.threshold_px, p.max_word_pairs, p.order, p.min_inliers
+        p.top_k,
+        p.model,
+        p.fit().estimator_used(),
+        p.threshold_px,
+        p.max_word_pairs,
+        p.order,
+        p.min_inliers
     );
     for r in &report.rows {
         for (name, x) in [("no", &r.without), ("yes", &r.with)] {

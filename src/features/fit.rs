@@ -75,6 +75,24 @@ impl ModelFit for OpenCvFit {
                 )
                 .map_err(fail)?
             }
+            (model @ (Model::Similarity | Model::Affine), _) => {
+                let estimate = match model {
+                    Model::Similarity => opencv::calib3d::estimate_affine_partial_2d,
+                    _ => opencv::calib3d::estimate_affine_2d,
+                };
+                // RANSAC, then 10 Levenberg–Marquardt refinements on the inliers
+                estimate(
+                    &src,
+                    &dst,
+                    &mut mask,
+                    opencv::calib3d::RANSAC,
+                    p.threshold_px,
+                    p.max_iters as usize,
+                    p.confidence,
+                    10,
+                )
+                .map_err(fail)?
+            }
         };
         if model.empty() || mask.empty() {
             return Ok(vec![false; query.len()]);
@@ -115,9 +133,20 @@ mod tests {
         ]
     }
 
-    /// 60 true pairs (with half-pixel noise) and 140 outliers, shuffled;
-    /// returns the pairs and which are true.
+    /// A known similarity: rotation by 0.3 rad, scale 1.1, translation.
+    fn similar(p: [f32; 2]) -> [f32; 2] {
+        let (c, s) = (1.1 * 0.3f32.cos(), 1.1 * 0.3f32.sin());
+        [c * p[0] - s * p[1] + 30.0, s * p[0] + c * p[1] - 20.0]
+    }
+
+    /// 60 true pairs under [`H`] (with half-pixel noise) and 140 outliers,
+    /// shuffled; returns the pairs and which are true.
     fn synthetic(seed: u64) -> (Correspondences, Vec<bool>) {
+        synthetic_under(seed, apply)
+    }
+
+    /// [`synthetic`] with the true pairs related by `apply`.
+    fn synthetic_under(seed: u64, apply: fn([f32; 2]) -> [f32; 2]) -> (Correspondences, Vec<bool>) {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut pairs: Vec<([f32; 2], [f32; 2], bool)> = Vec::new();
         for i in 0..200 {
@@ -181,17 +210,40 @@ mod tests {
     }
 
     #[test]
+    fn a_similarity_and_an_affine_map_find_the_true_pairs() {
+        for model in [Model::Similarity, Model::Affine] {
+            for seed in 0..3 {
+                let f = fit(model, Estimator::Ransac);
+                let (c, truth) = synthetic_under(seed, similar);
+                let mask = f.inliers(&c.query, &c.map).unwrap();
+                let found_true = mask.iter().zip(&truth).filter(|(m, t)| **m && **t).count();
+                let found_false = mask.iter().zip(&truth).filter(|(m, t)| **m && !**t).count();
+                assert_eq!(found_true, 60, "{model:?} seed {seed}");
+                assert!(found_false <= 2, "{model:?} seed {seed}: {found_false}");
+            }
+        }
+    }
+
+    #[test]
     fn degenerate_input_answers_cleanly() {
-        for model in [Model::Homography, Model::Fundamental] {
+        let models = [
+            Model::Homography,
+            Model::Fundamental,
+            Model::Similarity,
+            Model::Affine,
+        ];
+        for model in models {
             for estimator in [Estimator::Ransac, Estimator::Magsac] {
                 let f = fit(model, estimator);
-                // too few pairs
+                // too few pairs: one fewer than the model needs
+                let points = [[1.0, 2.0], [3.0, 5.0], [9.0, 1.0], [4.0, 8.0], [7.0, 7.0]];
+                let n = model.min_matches() - 1;
                 let few = Correspondences {
-                    query: vec![[1.0, 2.0], [3.0, 5.0], [9.0, 1.0]],
-                    map: vec![[1.0, 2.0], [3.0, 5.0], [9.0, 1.0]],
+                    query: points.iter().cycle().take(n).copied().collect(),
+                    map: points.iter().cycle().take(n).copied().collect(),
                 };
                 assert_eq!(count_inliers(&few, &f, 1).inliers, 0);
-                assert_eq!(f.inliers(&few.query, &few.map).unwrap(), vec![false; 3]);
+                assert_eq!(f.inliers(&few.query, &few.map).unwrap(), vec![false; n]);
                 // collinear
                 let line = Correspondences {
                     query: (0..30).map(|i| [i as f32 * 7.0, i as f32 * 3.0]).collect(),

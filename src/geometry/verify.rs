@@ -23,6 +23,10 @@ pub enum Model {
     Homography,
     /// Epipolar geometry of two views (8 matches at least).
     Fundamental,
+    /// Rotation, uniform scale and translation (2 matches at least).
+    Similarity,
+    /// A 2-D affine map (3 matches at least).
+    Affine,
 }
 
 /// The robust estimator.
@@ -122,8 +126,10 @@ impl std::str::FromStr for Model {
         match s {
             "homography" => Ok(Self::Homography),
             "fundamental" => Ok(Self::Fundamental),
+            "similarity" => Ok(Self::Similarity),
+            "affine" => Ok(Self::Affine),
             _ => Err(format!(
-                "unknown model `{s}`; use homography or fundamental"
+                "unknown model `{s}`; use homography, fundamental, similarity or affine"
             )),
         }
     }
@@ -155,12 +161,25 @@ pub struct FitParams {
     pub max_iters: u32,
 }
 
+impl FitParams {
+    /// The estimator the fit runs: the one asked for, except for a
+    /// similarity or an affine map, which OpenCV fits by RANSAC only.
+    pub fn estimator_used(&self) -> Estimator {
+        match self.model {
+            Model::Homography | Model::Fundamental => self.estimator,
+            Model::Similarity | Model::Affine => Estimator::Ransac,
+        }
+    }
+}
+
 impl Model {
     /// Fewest correspondences the model can be fitted to.
     pub fn min_matches(self) -> usize {
         match self {
             Self::Homography => 4,
             Self::Fundamental => 8,
+            Self::Similarity => 2,
+            Self::Affine => 3,
         }
     }
 }

@@ -723,6 +723,21 @@ mod tests {
     }
 
     #[test]
+    fn every_verification_model_can_be_configured() {
+        use crate::geometry::verify::Model;
+        for (name, model) in [
+            ("homography", Model::Homography),
+            ("fundamental", Model::Fundamental),
+            ("similarity", Model::Similarity),
+            ("affine", Model::Affine),
+        ] {
+            let c = load_str(&format!("[verify]\nmodel = \"{name}\"\n"), &[]).unwrap();
+            assert_eq!(c.verify.model, model);
+            assert_eq!(name.parse::<Model>(), Ok(model));
+        }
+    }
+
+    #[test]
     fn a_sequence_warm_up_is_auto_or_a_number_of_features() {
         use crate::calibrate::Warmup;
         let warmup = |toml: &str, env: &[(&str, &str)]| {
@@ -851,7 +866,7 @@ mod tests {
             ),
             ("[search]\nquantizer = \"fast\"\n", "search.quantizer"),
             ("[verify]\ntop_k = 0\n", "top_k"),
-            ("[verify]\nmodel = \"affine\"\n", "model"),
+            ("[verify]\nmodel = \"projective\"\n", "model"),
             ("[verify]\nconfidence = 1.5\n", "confidence"),
             ("[verify]\nstop_log_scale = -0.1\n", "stop_log_scale"),
             (
