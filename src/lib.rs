@@ -41,6 +41,31 @@
 //! `geometry`, `sequence`) has no OpenCV or HTTP types; front ends (`cli`,
 //! `server`) live at the edges.
 
+/// `Display` and `FromStr` by the names of a choice's `ALL` list, so the
+/// accepted names and the error listing them come from one place.
+macro_rules! named_choice {
+    ($t:ty, $what:literal) => {
+        impl std::fmt::Display for $t {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(self.name())
+            }
+        }
+
+        impl std::str::FromStr for $t {
+            type Err = String;
+            fn from_str(s: &str) -> Result<Self, String> {
+                Self::ALL
+                    .into_iter()
+                    .find(|c| c.name() == s)
+                    .ok_or_else(|| {
+                        let names: Vec<&str> = Self::ALL.iter().map(|c| c.name()).collect();
+                        format!("unknown {} `{s}`; use one of {}", $what, names.join(", "))
+                    })
+            }
+        }
+    };
+}
+
 pub mod calibrate;
 pub mod dataset;
 pub mod eval;

@@ -64,26 +64,45 @@ pub fn min_distinct(text: &str) -> Result<f32, String> {
     SearchOptions::check_min_distinct(cut)
 }
 
-/// The tile orders, each with what it does, parsed to a [`TileOrder`].
-pub fn tile_order_parser() -> impl clap::builder::TypedValueParser<Value = TileOrder> {
-    use clap::builder::TypedValueParser as _;
-    PossibleValuesParser::new(
-        TileOrder::ALL
-            .iter()
-            .map(|o| PossibleValue::new(o.name()).help(o.about())),
-    )
-    .map(|name: String| name.parse::<TileOrder>().expect("a listed tile order"))
+/// A setting chosen by name from a fixed list, each entry with a line of
+/// help: the list, names and help texts are the type's own.
+pub trait Choice: Copy + Send + Sync + 'static {
+    const ALL: &'static [Self];
+    fn name(self) -> &'static str;
+    fn about(self) -> &'static str;
 }
 
-/// The verification orders, each with what it does, parsed to an [`Order`].
-fn verify_order_parser() -> impl clap::builder::TypedValueParser<Value = Order> {
+macro_rules! choice {
+    ($($t:ty),*) => {$(
+        impl Choice for $t {
+            const ALL: &'static [Self] = &<$t>::ALL;
+            fn name(self) -> &'static str {
+                <$t>::name(self)
+            }
+            fn about(self) -> &'static str {
+                <$t>::about(self)
+            }
+        }
+    )*};
+}
+
+choice!(TileOrder, Order, Model, Estimator);
+
+/// A [`Choice`]'s names, each with what it does, parsed to the choice.
+pub fn choice_parser<T: Choice>() -> impl clap::builder::TypedValueParser<Value = T> {
     use clap::builder::TypedValueParser as _;
     PossibleValuesParser::new(
-        Order::ALL
+        T::ALL
             .iter()
-            .map(|o| PossibleValue::new(o.name()).help(o.about())),
+            .map(|c| PossibleValue::new(c.name()).help(c.about())),
     )
-    .map(|name: String| name.parse::<Order>().expect("a listed order"))
+    .map(|name: String| {
+        T::ALL
+            .iter()
+            .copied()
+            .find(|c| c.name() == name)
+            .expect("a listed name")
+    })
 }
 
 fn rule_parser() -> PossibleValuesParser {
@@ -153,7 +172,7 @@ pub struct SearchArgs {
     #[arg(long, default_value_t = SearchOptions::recommended().place_window, value_parser = place_window)]
     pub place_window: u32,
     /// The order tiles are extracted in.
-    #[arg(long, default_value_t = SearchOptions::recommended().tile_order, value_parser = tile_order_parser())]
+    #[arg(long, default_value_t = SearchOptions::recommended().tile_order, value_parser = choice_parser::<TileOrder>())]
     pub tile_order: TileOrder,
 }
 
@@ -360,13 +379,13 @@ pub struct VerifyArgs {
     #[arg(long, default_value_t = VerifyParams::default().max_hamming)]
     pub max_hamming: u32,
     /// Order of the verified candidates.
-    #[arg(long, default_value_t = VerifyParams::default().order, value_parser = verify_order_parser())]
+    #[arg(long, default_value_t = VerifyParams::default().order, value_parser = choice_parser::<Order>())]
     pub verify_order: Order,
-    /// Geometric model: homography, fundamental, similarity or affine (the last two by RANSAC whatever the estimator).
-    #[arg(long, default_value = "homography")]
+    /// Geometric model.
+    #[arg(long, default_value_t = VerifyParams::default().model, value_parser = choice_parser::<Model>())]
     pub model: Model,
-    /// Robust estimator: ransac or magsac.
-    #[arg(long, default_value = "magsac")]
+    /// Robust estimator.
+    #[arg(long, default_value_t = VerifyParams::default().estimator, value_parser = choice_parser::<Estimator>())]
     pub estimator: Estimator,
     /// Inlier threshold in pixels of the extraction frame.
     #[arg(long, default_value_t = VerifyParams::default().threshold_px)]

@@ -67,7 +67,7 @@ pub struct EvalArgs {
     #[arg(long, default_value = "2x2+24")]
     tiles: TilePlan,
     /// The order the tiles are replayed in, as the service extracts them.
-    #[arg(long, default_value_t = bowloc::search::TileOrder::default(), value_parser = super::args::tile_order_parser())]
+    #[arg(long, default_value_t = bowloc::search::TileOrder::default(), value_parser = super::args::choice_parser::<bowloc::search::TileOrder>())]
     tile_order: bowloc::search::TileOrder,
     /// Images on each side, along the map's order, that count as one place
     /// when a candidate's distinctness is measured (and for the rule

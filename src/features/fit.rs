@@ -42,58 +42,51 @@ impl ModelFit for OpenCvFit {
         let (src, dst) = (points(query), points(map));
         let mut mask = Mat::default();
         let fail = |e: opencv::Error| FitError(e.message);
-        let model = match (p.model, p.estimator) {
-            (Model::Homography, estimator) => {
-                let method = match estimator {
-                    Estimator::Ransac => opencv::calib3d::RANSAC,
-                    Estimator::Magsac => opencv::calib3d::USAC_MAGSAC,
-                };
-                opencv::calib3d::find_homography_ext(
-                    &src,
-                    &dst,
-                    method,
-                    p.threshold_px,
-                    &mut mask,
-                    p.max_iters as i32,
-                    p.confidence,
-                )
-                .map_err(fail)?
-            }
-            (Model::Fundamental, estimator) => {
-                let method = match estimator {
-                    Estimator::Ransac => opencv::calib3d::FM_RANSAC,
-                    Estimator::Magsac => opencv::calib3d::USAC_MAGSAC,
-                };
-                opencv::calib3d::find_fundamental_mat(
-                    &src,
-                    &dst,
-                    method,
-                    p.threshold_px,
-                    p.confidence,
-                    p.max_iters as i32,
-                    &mut mask,
-                )
-                .map_err(fail)?
-            }
-            (model @ (Model::Similarity | Model::Affine), _) => {
-                let estimate = match model {
+        // the estimator the model is fitted with (a similarity or an affine
+        // map only by RANSAC), as OpenCV names it
+        let method = match (p.model, p.estimator_used()) {
+            (_, Estimator::Magsac) => opencv::calib3d::USAC_MAGSAC,
+            (Model::Fundamental, Estimator::Ransac) => opencv::calib3d::FM_RANSAC,
+            (_, Estimator::Ransac) => opencv::calib3d::RANSAC,
+        };
+        let model = match p.model {
+            Model::Homography => opencv::calib3d::find_homography_ext(
+                &src,
+                &dst,
+                method,
+                p.threshold_px,
+                &mut mask,
+                p.max_iters as i32,
+                p.confidence,
+            ),
+            Model::Fundamental => opencv::calib3d::find_fundamental_mat(
+                &src,
+                &dst,
+                method,
+                p.threshold_px,
+                p.confidence,
+                p.max_iters as i32,
+                &mut mask,
+            ),
+            Model::Similarity | Model::Affine => {
+                let estimate = match p.model {
                     Model::Similarity => opencv::calib3d::estimate_affine_partial_2d,
                     _ => opencv::calib3d::estimate_affine_2d,
                 };
-                // RANSAC, then 10 Levenberg–Marquardt refinements on the inliers
+                // then 10 Levenberg–Marquardt refinements on the inliers
                 estimate(
                     &src,
                     &dst,
                     &mut mask,
-                    opencv::calib3d::RANSAC,
+                    method,
                     p.threshold_px,
                     p.max_iters as usize,
                     p.confidence,
                     10,
                 )
-                .map_err(fail)?
             }
-        };
+        }
+        .map_err(fail)?;
         if model.empty() || mask.empty() {
             return Ok(vec![false; query.len()]);
         }
@@ -211,9 +204,14 @@ mod tests {
 
     #[test]
     fn a_similarity_and_an_affine_map_find_the_true_pairs() {
-        for model in [Model::Similarity, Model::Affine] {
+        // MAGSAC++ asked for, these models are still fitted (by RANSAC)
+        for (model, estimator) in [
+            (Model::Similarity, Estimator::Ransac),
+            (Model::Affine, Estimator::Ransac),
+            (Model::Similarity, Estimator::Magsac),
+        ] {
             for seed in 0..3 {
-                let f = fit(model, Estimator::Ransac);
+                let f = fit(model, estimator);
                 let (c, truth) = synthetic_under(seed, similar);
                 let mask = f.inliers(&c.query, &c.map).unwrap();
                 let found_true = mask.iter().zip(&truth).filter(|(m, t)| **m && **t).count();

@@ -101,50 +101,70 @@ impl Order {
     }
 }
 
-impl std::fmt::Display for Order {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
+impl Model {
+    /// Every model, the default first.
+    pub const ALL: [Model; 4] = [
+        Model::Homography,
+        Model::Fundamental,
+        Model::Similarity,
+        Model::Affine,
+    ];
 
-impl std::str::FromStr for Order {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        Self::ALL
-            .into_iter()
-            .find(|o| o.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<&str> = Self::ALL.iter().map(|o| o.name()).collect();
-                format!("unknown order `{s}`; use one of {}", names.join(", "))
-            })
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Homography => "homography",
+            Self::Fundamental => "fundamental",
+            Self::Similarity => "similarity",
+            Self::Affine => "affine",
+        }
     }
-}
 
-impl std::str::FromStr for Model {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "homography" => Ok(Self::Homography),
-            "fundamental" => Ok(Self::Fundamental),
-            "similarity" => Ok(Self::Similarity),
-            "affine" => Ok(Self::Affine),
-            _ => Err(format!(
-                "unknown model `{s}`; use homography, fundamental, similarity or affine"
-            )),
+    /// What the model is, in a line (for help texts).
+    pub fn about(self) -> &'static str {
+        match self {
+            Self::Homography => "a plane-to-plane map (4 pairs at least)",
+            Self::Fundamental => "epipolar geometry of two views (8 pairs at least)",
+            Self::Similarity => {
+                "rotation, one scale and translation (2 pairs at least; fitted by RANSAC)"
+            }
+            Self::Affine => "a 2-D affine map (3 pairs at least; fitted by RANSAC)",
+        }
+    }
+
+    /// Fewest correspondences the model can be fitted to.
+    pub fn min_matches(self) -> usize {
+        match self {
+            Self::Homography => 4,
+            Self::Fundamental => 8,
+            Self::Similarity => 2,
+            Self::Affine => 3,
         }
     }
 }
 
-impl std::str::FromStr for Estimator {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "ransac" => Ok(Self::Ransac),
-            "magsac" => Ok(Self::Magsac),
-            _ => Err(format!("unknown estimator `{s}`; use ransac or magsac")),
+impl Estimator {
+    /// Every estimator, the default first.
+    pub const ALL: [Estimator; 2] = [Estimator::Magsac, Estimator::Ransac];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Ransac => "ransac",
+            Self::Magsac => "magsac",
+        }
+    }
+
+    /// What the estimator is, in a line (for help texts).
+    pub fn about(self) -> &'static str {
+        match self {
+            Self::Ransac => "classic RANSAC",
+            Self::Magsac => "USAC with MAGSAC++ scoring (a homography or a fundamental matrix)",
         }
     }
 }
+
+named_choice!(Order, "order");
+named_choice!(Model, "model");
+named_choice!(Estimator, "estimator");
 
 /// How a model is fitted.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -168,18 +188,6 @@ impl FitParams {
         match self.model {
             Model::Homography | Model::Fundamental => self.estimator,
             Model::Similarity | Model::Affine => Estimator::Ransac,
-        }
-    }
-}
-
-impl Model {
-    /// Fewest correspondences the model can be fitted to.
-    pub fn min_matches(self) -> usize {
-        match self {
-            Self::Homography => 4,
-            Self::Fundamental => 8,
-            Self::Similarity => 2,
-            Self::Affine => 3,
         }
     }
 }

@@ -66,21 +66,7 @@ impl TileOrder {
     }
 }
 
-impl std::str::FromStr for TileOrder {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        Self::ALL
-            .into_iter()
-            .find(|o| o.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<&str> = Self::ALL.iter().map(|o| o.name()).collect();
-                format!(
-                    "unknown tile order {s:?}; expected one of {}",
-                    names.join(", ")
-                )
-            })
-    }
-}
+named_choice!(TileOrder, "tile order");
 
 /// What is known of a query's tiles before any is extracted, one entry per
 /// tile in grid order: its FAST corners and its cell (column, row) in the grid.
@@ -88,12 +74,6 @@ impl std::str::FromStr for TileOrder {
 pub struct TileGuide<'a> {
     pub corners: &'a [f32],
     pub cells: &'a [[u32; 2]],
-}
-
-impl std::fmt::Display for TileOrder {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
 }
 
 /// The order in which an image's `n` extraction units are extracted: the

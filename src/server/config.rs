@@ -723,18 +723,26 @@ mod tests {
     }
 
     #[test]
-    fn every_verification_model_can_be_configured() {
-        use crate::geometry::verify::Model;
-        for (name, model) in [
-            ("homography", Model::Homography),
-            ("fundamental", Model::Fundamental),
-            ("similarity", Model::Similarity),
-            ("affine", Model::Affine),
-        ] {
+    fn every_verification_model_and_estimator_can_be_configured_by_name() {
+        use crate::geometry::verify::{Estimator, Model};
+        // the file's names (serde's) are the ones the CLI and errors list
+        for model in Model::ALL {
+            let name = model.name();
             let c = load_str(&format!("[verify]\nmodel = \"{name}\"\n"), &[]).unwrap();
             assert_eq!(c.verify.model, model);
             assert_eq!(name.parse::<Model>(), Ok(model));
         }
+        for estimator in Estimator::ALL {
+            let name = estimator.name();
+            let c = load_str(&format!("[verify]\nestimator = \"{name}\"\n"), &[]).unwrap();
+            assert_eq!(c.verify.estimator, estimator);
+            assert_eq!(name.parse::<Estimator>(), Ok(estimator));
+        }
+        let e = "projective".parse::<Model>().unwrap_err();
+        assert!(
+            e.contains("homography, fundamental, similarity, affine"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -801,12 +809,16 @@ mod tests {
                 "config/default.toml must describe the tile order {quoted}"
             );
         }
-        // every verification order, quoted
-        for order in crate::geometry::verify::Order::ALL {
-            let quoted = format!("\"{}\"", order.name());
+        // every verification order, model and estimator, quoted
+        use crate::geometry::verify::{Estimator, Model, Order};
+        let names = (Order::ALL.iter().map(|o| o.name()))
+            .chain(Model::ALL.iter().map(|m| m.name()))
+            .chain(Estimator::ALL.iter().map(|e| e.name()));
+        for name in names {
+            let quoted = format!("\"{name}\"");
             assert!(
                 comments.contains(&quoted),
-                "config/default.toml must describe the verification order {quoted}"
+                "config/default.toml must describe the verification setting {quoted}"
             );
         }
     }
