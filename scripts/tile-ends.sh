@@ -86,7 +86,10 @@ show(f"best z per tile end {best}", *both(lambda e, i: e[i]["z"] > best[i]))
 for m in (12, 24, 48):
     show(f"z > 1 with {m} place inliers, or z > 2",
          *both(lambda e, i, m=m: (e[i]["z"] > 1 and e[i]["place_inliers"] >= m) or e[i]["z"] > 2))
-show("oracle", *both(lambda e, i: e[i]["top1"] >= e[-1]["top1"] and e[i]["top5"] >= e[-1]["top5"]))
+def as_good(ends, i, top1="top1", top5="top5"):
+    """Whether the answer at tile end i is as good as the full search's (the last end's)."""
+    return ends[i][top1] >= ends[-1][top1] and ends[i][top5] >= ends[-1][top5]
+show("oracle", *both(as_good))
 def auc(good, bad):
     """How often a search that answers as well as the full search scores above one that does not."""
     good = sorted(good)
@@ -103,7 +106,7 @@ statistics_at_two = {
     "its place's inliers": lambda e, p: e["place_inliers"],
 }
 def separation(statistics, top1="top1", top5="top5", label="the full search"):
-    is_worse = lambda ends: ends[-1][top1] > ends[1][top1] or ends[-1][top5] > ends[1][top5]
+    is_worse = lambda ends: not as_good(ends, 1, top1, top5)
     worse = [ends for ends in gp.values() if is_worse(ends)]
     print(f"gardens-point after two tiles: {len(worse)} of {len(gp)} searches answer worse than {label}; "
           "AUC of each statistic against them:")
@@ -131,7 +134,7 @@ schedules = ((evaluate(gp, lambda e, i, t=t: e[i]["z"] > t[i], *verified), t)
              for t in itertools.product(grid, repeat=3))
 best = min((median, t) for (loss, median, _), t in schedules if loss <= 1.0)[1]
 show(f"best z per tile end {best}", *both(lambda e, i: e[i]["z"] > best[i], *verified))
-show("oracle, verified", *both(lambda e, i: e[i]["vtop1"] >= e[-1]["vtop1"] and e[i]["vtop5"] >= e[-1]["vtop5"], *verified))
+show("oracle, verified", *both(lambda e, i: as_good(e, i, *verified), *verified))
 separation({
     "z": lambda e, p: e["z"],
     "the answer's inliers": lambda e, p: e["v_inliers"],
@@ -154,11 +157,9 @@ def features(ends, i):
             math.log1p(e["v_inliers"] * scaled), scaled, e["tile_agrees"], e["tile_leader_z"],
             float(p is not None and abs(p["leader"] - e["leader"]) <= 2),
             e["z"] - p["z"] if p else 0.0, math.log1p(e["features"]), float(i == 0), float(i == 1)]
-def as_good(ends, i):
-    return float(ends[i]["vtop1"] >= ends[-1]["vtop1"] and ends[i]["vtop5"] >= ends[-1]["vtop5"])
 def fit(rows, l2=1e-3, steps=400, rate=0.5):
     X = [features(ends, i) for ends in rows.values() for i in range(len(ends) - 1)]
-    y = [as_good(ends, i) for ends in rows.values() for i in range(len(ends) - 1)]
+    y = [float(as_good(ends, i, *verified)) for ends in rows.values() for i in range(len(ends) - 1)]
     mu = [statistics.mean(c) for c in zip(*X)]
     sd = [statistics.pstdev(c) or 1.0 for c in zip(*X)]
     mu[0], sd[0] = 0.0, 1.0
@@ -171,7 +172,13 @@ def fit(rows, l2=1e-3, steps=400, rate=0.5):
             for j, v in enumerate(z):
                 g[j] += d * v
         w = [a - rate * (b / len(Z) + l2 * a) for a, b in zip(w, g)]
-    return lambda ends, i: sum(a * (v - m) / s for a, v, m, s in zip(w, features(ends, i), mu, sd))
+    scored = {}  # by the row list's identity: each tile end is scored once
+    def score(ends, i):
+        if id(ends) not in scored:
+            scored[id(ends)] = [sum(a * (v - m) / s for a, v, m, s in zip(w, features(ends, k), mu, sd))
+                                for k in range(len(ends))]
+        return scored[id(ends)][i]
+    return score
 seeds = lambda rows, keep: {k: v for k, v in rows.items() if k[0] in keep}
 thresholds = [t / 4 for t in range(0, 41)]
 def first_within_a_point(rows, score):
@@ -179,12 +186,12 @@ def first_within_a_point(rows, score):
                 if evaluate(rows, lambda e, i: score(e, i) > t, *verified)[0] <= 1.0)
 print("all the statistics at once (a logistic regression; a stop when its score passes a threshold), verified:")
 for held in ("1", "2", "3"):
-    train = seeds(gp, {"1", "2", "3"} - {held})
+    train, test = seeds(gp, {"1", "2", "3"} - {held}), seeds(gp, {held})
     score = fit(train)
     t = first_within_a_point(train, score)
-    tried = evaluate(seeds(gp, {held}), lambda e, i: score(e, i) > t, *verified)
-    good = [score(e, 1) for e in seeds(gp, {held}).values() if as_good(e, 1)]
-    bad = [score(e, 1) for e in seeds(gp, {held}).values() if not as_good(e, 1)]
+    tried = evaluate(test, lambda e, i: score(e, i) > t, *verified)
+    good = [score(e, 1) for e in test.values() if as_good(e, 1, *verified)]
+    bad = [score(e, 1) for e in test.values() if not as_good(e, 1, *verified)]
     print(f"  fitted on the other seeds, threshold {t:.2f}, tried on gardens-point seed {held}: loss {tried[0]:4.1f}, "
           f"time {tried[1]:.3f} / {tried[2]:.3f}; AUC after two tiles {auc(good, bad):.3f}")
 score = fit(gp)
