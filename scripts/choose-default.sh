@@ -6,38 +6,55 @@
 # tile order); then the same threshold on the dataset kept aside. Prints, for
 # every threshold, the worst seed's loss on each dataset, the share of
 # features and the request time against the whole-image full search (mean
-# and median over seeds × queries × runs).
+# and median over seeds × queries × runs), then each seed's recall@1 and
+# recall top-1 @90 % precision (by distinctness) on the dataset chosen on.
+#
+# By default the rule is tried as the service runs it: with geometric
+# verification (the configured model) and the verified stop beside it
+# (`RULE=T+verified=M`), against the verified full search.
 #
 #   scripts/choose-default.sh [OUT]     (default OUT: data/eval/choose)
 #
 # Environment: RULE (default place-z), WARMUP (default 20), GRID (default
 # "1 1.25 1.5 1.75 2 2.25 2.5 3"), CHOOSE and ASIDE (NAME:WORDS; default
-# gardens-point:5000 and rtabmap-loop:1000).
+# gardens-point:5000 and rtabmap-loop:1000), VERIFIED (the verified stop's
+# inliers, default 12; 0: the vote rule alone, without verification) and
+# MODEL (the verification model, default the configuration's).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-data/eval/choose}
 rule=${RULE:-place-z}
 warmup=${WARMUP:-20}
 grid=${GRID:-1 1.25 1.5 1.75 2 2.25 2.5 3}
+verified=${VERIFIED:-12}
 choose=${CHOOSE:-gardens-point:5000}
 aside=${ASIDE:-rtabmap-loop:1000}
 [ -x target/release/bowloc ] || cargo build --release
 sets=()
-for t in $grid; do sets+=(--set "$rule=$t@$warmup"); done
+verify=()
+if [ "$verified" = 0 ]; then
+  for t in $grid; do sets+=(--set "$rule=$t@$warmup"); done
+else
+  for t in $grid; do sets+=(--set "$rule=$t+verified=$verified@$warmup"); done
+  verify=(--verify ${MODEL:+--model "$MODEL"})
+fi
 for dataset in "$choose" "$aside"; do
   name=${dataset%%:*}
   ./target/release/bowloc --log warn eval --dataset "../shared/datasets/$name" --words "${dataset##*:}" \
-    --runs 3 --vocab-seeds 3 --rules none "${sets[@]}" --no-plots --out "$out/$name" >/dev/null
+    --runs 3 --vocab-seeds 3 --rules none "${verify[@]}" "${sets[@]}" --no-plots --out "$out/$name" >/dev/null
 done
-python3 - "$out/${choose%%:*}/results.json" "$out/${aside%%:*}/results.json" <<'PY'
+# the full search compared with: verified if the rule is
+full_label=none
+[ "$verified" = 0 ] || full_label="none +verify"
+python3 - "$out/${choose%%:*}/results.json" "$out/${aside%%:*}/results.json" "$full_label" <<'PY'
 import json, sys
 
 def rows(path):
     d = json.load(open(path))
-    full = next(s for s in d["settings"] if s["label"] == "none")
+    full = next(s for s in d["settings"] if s["label"] == sys.argv[3])
     out = []
     for s in d["settings"]:
-        if s["label"] == "none":
+        if s["label"].startswith("none"):
             continue
         loss = max(
             100 * (f - r)
@@ -57,4 +74,15 @@ for (label, loss, feat, mean, median), other in zip(a, b):
           f"features {other[2]:5.1f} %, x full {other[3]:.3f} / {other[4]:.3f}{mark}")
 if pick is None:
     print(f"no threshold of the grid loses at most 1 point on {chosen_on}")
+
+# per vocabulary seed on the dataset chosen on: recall@1 and the top
+# candidate's recall at 90 % precision by distinctness (how well the
+# answers can be trusted by a cut), the full search first
+d = json.load(open(sys.argv[1]))
+print(f"{chosen_on} per vocabulary seed: recall@1 | recall top-1 @90 % precision by distinctness")
+for s in d["settings"]:
+    if s["label"] == "none" and sys.argv[3] != "none":
+        continue
+    per = lambda key: " / ".join(f"{100 * v:.1f}" for v in s[key]["per_seed"])
+    print(f"  {s['label']:40} {per('recall_at_1')} | {per('recall90_top1_distinct')}")
 PY

@@ -1,4 +1,4 @@
-//! The default rule, `place-z` at z = 2 after 20 features, on real images:
+//! The default rule, `place-z` at z = 2.25 after 20 features, on real images:
 //! one threshold means the same on two different maps. On every query of
 //! both shared datasets and several feature orders (whole images; each query
 //! quantized once and voted many times), its top-1 agrees with the full
@@ -79,7 +79,7 @@ fn measure(dataset: &str, words: usize, rules: &[RuleSpec]) -> Vec<Agreement> {
 
 /// Printed by this test on an Intel Xeon with AVX-512 (`cargo test
 /// --release --test place_z_real -- --nocapture`): see docs/results.md,
-/// "The default rule". The test asserts that `place-z 2`'s agreement
+/// "The default rule". The test asserts that the default `place-z`'s agreement
 /// differs by at most `MAX_GAP` between the maps and is at least
 /// `MIN_AGREEMENT` on each, and that `peak-mean 1.6`'s differs by more.
 const MAX_GAP: f64 = 0.03;
@@ -88,11 +88,11 @@ const MIN_AGREEMENT: f64 = 0.88;
 #[test]
 fn the_default_threshold_means_the_same_on_both_maps() {
     let recommended = SearchOptions::recommended();
-    // place-z 2 with its verified stop, which checks at tile ends only: on
-    // the whole images searched here the vote rule alone decides
+    // place-z 2.25 with its verified stop, which checks at tile ends only:
+    // on the whole images searched here the vote rule alone decides
     assert_eq!(
         recommended.rule,
-        RuleSpec::new("place-z", Some(2.0))
+        RuleSpec::new("place-z", Some(2.25))
             .and_then(|r| r.or_verified(Some(12.0)))
             .unwrap()
     );

@@ -6,6 +6,8 @@ mod common;
 
 use std::process::Command;
 
+use bowloc::search::SearchOptions;
+
 #[test]
 fn sharded_search_answers_as_one_machine_on_real_images() {
     let dir = tempfile::tempdir().unwrap();
@@ -38,7 +40,14 @@ fn sharded_search_answers_as_one_machine_on_real_images() {
         )),
         "{stdout}"
     );
-    for setting in ["| none | 2 |", "| lossless | 8 |", "| place-z 2 w=20 | 8 |"] {
+    // the default rule among them
+    let default = format!(
+        "| {} {} w={} | 8 |",
+        SearchOptions::RECOMMENDED_RULE,
+        SearchOptions::RECOMMENDED_PARAMETER,
+        SearchOptions::RECOMMENDED_WARMUP
+    );
+    for setting in ["| none | 2 |", "| lossless | 8 |", default.as_str()] {
         assert!(stdout.contains(setting), "{setting} missing:\n{stdout}");
     }
 }

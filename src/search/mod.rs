@@ -110,7 +110,7 @@ impl SearchOptions {
     /// The rule every front end uses unless told otherwise.
     pub const RECOMMENDED_RULE: &'static str = "place-z";
     /// Its parameter.
-    pub const RECOMMENDED_PARAMETER: f64 = 2.0;
+    pub const RECOMMENDED_PARAMETER: f64 = 2.25;
     /// Features voted before it is first consulted. `place-z` measures its
     /// own evidence and would stop without one; the warm-up keeps enough
     /// features for a geometric verification of the answer (12 inliers).

@@ -157,7 +157,7 @@ check "raw upload is 200" test "$status" = 200
 check "answer has 3 ranked candidates" test "$(jq -r '[.candidates[].rank] | join(",")' "$B")" = "1,2,3"
 check "answer reports features, rule, stop, seed, timings, map" jqt '
   .features.total > 0 and .features.used <= .features.total and .features.fraction > 0
-  and .rule.name == "place-z" and .rule.value == 2 and (.stop.kind | IN("rule","exhausted","deadline"))
+  and .rule.name == "place-z" and .rule.value == 2.25 and (.stop.kind | IN("rule","exhausted","deadline"))
   and .stop.at_feature == .features.used and .seed == 7
   and .timings_ms.total > 0 and .timings_ms.extract > 0
   and .map.name == "rtabmap-loop" and .map.images == 40 and .map.words == 1000
@@ -224,7 +224,7 @@ check "or_verified=12 beside place-z is reported and verifies the answer ($(jq -
   and (.candidates[0] | has("inliers") and has("verified"))' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?seed=3")
 check "the default rule has its verified stop of 12 inliers" jqt --arg s "$status" '
-  $s == "200" and .rule == {"name": "place-z", "parameter": "threshold", "value": 2, "or_verified": 12}' "$B"
+  $s == "200" and .rule == {"name": "place-z", "parameter": "threshold", "value": 2.25, "or_verified": 12}' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=place-z&threshold=2&seed=3")
 check "naming the rule and its parameter searches without the verified stop" jqt --arg s "$status" '
   $s == "200" and .rule.name == "place-z" and (.rule | has("or_verified") | not)' "$B"
