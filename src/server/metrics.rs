@@ -264,6 +264,24 @@ pub fn collect_process() {
     process().collect();
 }
 
+/// The exposition text of every metric. `process_cpu_seconds_total` is
+/// recorded as a gauge, because the `metrics` crate's counters hold whole
+/// numbers and CPU time is fractional seconds; it only ever grows, so it is
+/// typed a counter here, as Prometheus' own clients export it.
+pub fn render(handle: &PrometheusHandle) -> String {
+    retype_as_counter(handle.render(), PROCESS_CPU_SECONDS)
+}
+
+const PROCESS_CPU_SECONDS: &str = "process_cpu_seconds_total";
+
+fn retype_as_counter(text: String, name: &str) -> String {
+    text.replacen(
+        &format!("# TYPE {name} gauge\n"),
+        &format!("# TYPE {name} counter\n"),
+        1,
+    )
+}
+
 /// A request answered with an error; a 503 is also a rejection.
 pub fn error(status: u16, code: &'static str) {
     counter!(HTTP_ERRORS, "status" => status.to_string(), "code" => code).increment(1);
@@ -340,4 +358,28 @@ pub fn map_loaded(map: &dyn MapRead) {
 
 pub fn ready(ready: bool) {
     gauge!(READY).set(if ready { 1.0 } else { 0.0 });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cpu_seconds_are_typed_a_counter_and_keep_their_fraction() {
+        let text = "# HELP process_cpu_seconds_total Total CPU time.\n\
+                    # TYPE process_cpu_seconds_total gauge\n\
+                    process_cpu_seconds_total 1.25\n\
+                    # TYPE process_open_fds gauge\n\
+                    process_open_fds 12\n";
+        let out = retype_as_counter(text.to_string(), PROCESS_CPU_SECONDS);
+        assert!(out.contains("# TYPE process_cpu_seconds_total counter\n"));
+        assert!(out.contains("process_cpu_seconds_total 1.25\n"));
+        assert!(out.contains("# TYPE process_open_fds gauge\n"));
+        // a text without it is left alone
+        let other = "# TYPE process_open_fds gauge\nprocess_open_fds 12\n";
+        assert_eq!(
+            retype_as_counter(other.to_string(), PROCESS_CPU_SECONDS),
+            other
+        );
+    }
 }

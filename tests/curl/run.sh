@@ -478,6 +478,8 @@ for name in process_resident_memory_bytes process_open_fds process_cpu_seconds_t
   check "process metric $name is exported and positive" \
     awk -v k="$name" '$1 == k && $2 > 0 { found = 1 } END { exit !found }' "$TMP/metrics.txt"
 done
+# a gauge underneath (whole-second counters otherwise), typed a counter
+check "process_cpu_seconds_total is typed a counter" grep -qx '# TYPE process_cpu_seconds_total counter' "$TMP/metrics.txt"
 check "metrics is Prometheus text" sh -c "curl -s -D - -o /dev/null '$BASE/metrics' | grep -qi '^content-type: text/plain; version=0.0.4'"
 check "map gauge holds the map size" grep -qx 'bowloc_map_images 40' "$TMP/metrics.txt"
 
