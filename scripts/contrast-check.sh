@@ -2,7 +2,9 @@
 # SIFT's contrast threshold against recall and the verified stop, on both
 # shared maps. For each threshold, `bowloc eval` (3 vocabulary seeds × 3
 # feature orders, verification on) of the full search, the `verified` rule
-# and the default rule (place-z 2 or verified 12, warm-up 20), then:
+# and the rule place-z 2 or verified 12, warm-up 20 (the default when the
+# script was written; docs/results.md, "Denser keypoints", has a run of the
+# current default too), then:
 # the features per query; the full search's recall@1 per vocabulary seed
 # without and with verification, and its recall top-1 @90 % precision (by
 # distinctness, verified); the verified stop's share of the features and its

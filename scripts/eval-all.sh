@@ -29,8 +29,9 @@ cargo build --release
 B=./target/release/bowloc
 D=../shared/datasets
 # settings run besides the grids, to see whether one carries over between maps
-sets=(--set place-z=2@20 --set peak-mean=1.6@20 --set relative=2.5@100
-      --set verified=8 --set verified=12)
+# (the service's default, place-z 2.25 with its verified stop, among them)
+sets=(--set place-z=2@20 --set place-z=2.25+verified=12@20 --set peak-mean=1.6@20
+      --set relative=2.5@100 --set verified=8 --set verified=12)
 for run in gardens-point:5000 rtabmap-loop:1000; do
   name=${run%%:*}
   words=${run##*:}
