@@ -41,10 +41,38 @@
 //! `geometry`, `sequence`) has no OpenCV or HTTP types; front ends (`cli`,
 //! `server`) live at the edges.
 
-/// `Display` and `FromStr` by the names of a choice's `ALL` list, so the
-/// accepted names and the error listing them come from one place.
+/// A setting chosen by name from a fixed list (a tile order, a
+/// verification model, …): the list, each entry's name and a line of help
+/// are the type's own, and every front end (configuration, CLI, HTTP
+/// parameters, error messages) reads them from here.
+pub trait Choice: Copy + Send + Sync + 'static {
+    /// Every choice, the default first.
+    const ALL: &'static [Self];
+    /// Its name in files, flags and answers.
+    fn name(self) -> &'static str;
+    /// What it does, in a line (help texts).
+    fn about(self) -> &'static str;
+    /// The choice of that name.
+    fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.iter().copied().find(|c| c.name() == name)
+    }
+}
+
+/// [`Choice`] from a type's own `ALL`, `name` and `about`, and `Display` and
+/// `FromStr` by those names, so the accepted names and the error listing
+/// them come from one place.
 macro_rules! named_choice {
     ($t:ty, $what:literal) => {
+        impl $crate::Choice for $t {
+            const ALL: &'static [Self] = &<$t>::ALL;
+            fn name(self) -> &'static str {
+                <$t>::name(self)
+            }
+            fn about(self) -> &'static str {
+                <$t>::about(self)
+            }
+        }
+
         impl std::fmt::Display for $t {
             fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
                 f.write_str(self.name())
@@ -54,13 +82,10 @@ macro_rules! named_choice {
         impl std::str::FromStr for $t {
             type Err = String;
             fn from_str(s: &str) -> Result<Self, String> {
-                Self::ALL
-                    .into_iter()
-                    .find(|c| c.name() == s)
-                    .ok_or_else(|| {
-                        let names: Vec<&str> = Self::ALL.iter().map(|c| c.name()).collect();
-                        format!("unknown {} `{s}`; use one of {}", $what, names.join(", "))
-                    })
+                <Self as $crate::Choice>::from_name(s).ok_or_else(|| {
+                    let names: Vec<&str> = Self::ALL.iter().map(|c| c.name()).collect();
+                    format!("unknown {} `{s}`; use one of {}", $what, names.join(", "))
+                })
             }
         }
     };

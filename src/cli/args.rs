@@ -1,5 +1,6 @@
 //! Argument groups shared by several subcommands.
 
+use bowloc::Choice;
 use bowloc::features::{ExtractConfig, SiftParams};
 use bowloc::geometry::verify::{Estimator, Model, Order, VerifyParams};
 use bowloc::search::stop::{GENERIC_PARAMETER, RULES, parse_rule};
@@ -64,30 +65,6 @@ pub fn min_distinct(text: &str) -> Result<f32, String> {
     SearchOptions::check_min_distinct(cut)
 }
 
-/// A setting chosen by name from a fixed list, each entry with a line of
-/// help: the list, names and help texts are the type's own.
-pub trait Choice: Copy + Send + Sync + 'static {
-    const ALL: &'static [Self];
-    fn name(self) -> &'static str;
-    fn about(self) -> &'static str;
-}
-
-macro_rules! choice {
-    ($($t:ty),*) => {$(
-        impl Choice for $t {
-            const ALL: &'static [Self] = &<$t>::ALL;
-            fn name(self) -> &'static str {
-                <$t>::name(self)
-            }
-            fn about(self) -> &'static str {
-                <$t>::about(self)
-            }
-        }
-    )*};
-}
-
-choice!(TileOrder, Order, Model, Estimator);
-
 /// A [`Choice`]'s names, each with what it does, parsed to the choice.
 pub fn choice_parser<T: Choice>() -> impl clap::builder::TypedValueParser<Value = T> {
     use clap::builder::TypedValueParser as _;
@@ -96,13 +73,7 @@ pub fn choice_parser<T: Choice>() -> impl clap::builder::TypedValueParser<Value 
             .iter()
             .map(|c| PossibleValue::new(c.name()).help(c.about())),
     )
-    .map(|name: String| {
-        T::ALL
-            .iter()
-            .copied()
-            .find(|c| c.name() == name)
-            .expect("a listed name")
-    })
+    .map(|name: String| T::from_name(&name).expect("a listed name"))
 }
 
 fn rule_parser() -> PossibleValuesParser {

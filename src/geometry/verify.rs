@@ -104,9 +104,9 @@ impl Order {
 impl Model {
     /// Every model, the default first.
     pub const ALL: [Model; 4] = [
+        Model::Similarity,
         Model::Homography,
         Model::Fundamental,
-        Model::Similarity,
         Model::Affine,
     ];
 

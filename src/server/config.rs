@@ -740,7 +740,7 @@ mod tests {
         }
         let e = "projective".parse::<Model>().unwrap_err();
         assert!(
-            e.contains("homography, fundamental, similarity, affine"),
+            e.contains("similarity, homography, fundamental, affine"),
             "{e}"
         );
     }
