@@ -7,8 +7,8 @@
 //! queries that start after it.
 
 use super::AppState;
+use super::body::{ImageUpload, receive_image};
 use super::errors::{ApiError, ErrorBody};
-use super::localize::{ImageUpload, receive_image};
 use super::openapi::Binary;
 use crate::index::MapRead;
 use crate::index::metadata::{PoseError, pose_row};

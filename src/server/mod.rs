@@ -9,7 +9,9 @@
 //! - [`connections`]: accepting and serving connections (cap, timeouts,
 //!   drain), and what the HTTP layer answers by itself;
 //! - [`bootstrap`]: building a missing default map, then loading;
-//! - [`localize`]: `POST /localize`, its parameters and body;
+//! - [`localize`]: `POST /localize` and its parameters;
+//! - [`body`]: the image of a request body (raw or multipart), read within
+//!   its limits, for `/localize` and `POST /images`;
 //! - [`sequences`]: the per-sequence state of `/localize?sequence=NAME`
 //!   (bounded, one lock each) and `DELETE /sequences/{name}`;
 //! - [`images`]: the map's images (add, remove, list), compaction, and the
@@ -25,6 +27,7 @@
 //! - [`metrics`], [`openapi`], [`proto`]: the exported metrics, the API
 //!   document and the protobuf answer.
 
+pub mod body;
 pub mod bootstrap;
 pub mod config;
 pub mod connections;

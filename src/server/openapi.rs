@@ -3,9 +3,10 @@
 //! stopping rules filled in from the rule registry. `docs/openapi.json` is a
 //! committed copy; a test checks it equals what the server serves.
 
+use super::body::ImageUpload;
 use super::errors::{ErrorBody, ErrorDetail};
 use super::images::{self, Compacted, ImageItem, ImagePage, Written};
-use super::localize::{self, ImageUpload};
+use super::localize;
 use super::status::{self, MapInfo, Status};
 use super::{page, thumbnails};
 use crate::report::{

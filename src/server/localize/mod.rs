@@ -1,0 +1,292 @@
+//! `POST /localize` and `DELETE /sequences/{name}`: the request's
+//! parameters (`params`) and image ([`super::body`]) in, the query run on
+//! the worker pool within the request's deadline, the answer out in JSON or
+//! protobuf as `Accept` asks.
+
+mod params;
+
+pub use params::{Defaults, LocalizeParams, Near};
+
+use super::AppState;
+use super::body::{ImageUpload, receive_image};
+use super::errors::{ApiError, ErrorBody};
+use super::openapi::Binary;
+use super::proto;
+use crate::index::MapRead;
+use crate::report::{Localization, SequenceAnswer};
+use crate::search::Prior;
+use axum::Json;
+use axum::extract::{RawQuery, Request, State};
+use axum::http::{HeaderMap, HeaderValue, header};
+use axum::response::{IntoResponse, Response};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// How the answer is encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    Json,
+    Protobuf,
+}
+
+impl Format {
+    /// Protobuf when `Accept` lists `application/x-protobuf` (or
+    /// `application/protobuf`) with a non-zero quality; JSON otherwise.
+    pub fn from_accept(headers: &HeaderMap) -> Self {
+        let wants_protobuf = headers
+            .get_all(header::ACCEPT)
+            .iter()
+            .filter_map(|v| v.to_str().ok())
+            .flat_map(|v| v.split(','))
+            .any(|item| {
+                let mut parts = item.split(';').map(str::trim);
+                let media = parts.next().unwrap_or("").to_ascii_lowercase();
+                let refused = parts.any(|p| {
+                    p.strip_prefix("q=")
+                        .and_then(|q| q.trim().parse::<f32>().ok())
+                        .is_some_and(|q| q <= 0.0)
+                });
+                (media == proto::CONTENT_TYPE || media == "application/protobuf") && !refused
+            });
+        if wants_protobuf {
+            Self::Protobuf
+        } else {
+            Self::Json
+        }
+    }
+}
+
+/// What the request log line reports about a localization.
+#[derive(Debug, Clone, Copy)]
+pub struct LocalizeSummary {
+    pub features: usize,
+    pub fraction: f64,
+    pub candidates: usize,
+}
+
+/// Localize an image.
+///
+/// The body is the image itself (`Content-Type: image/*` or
+/// `application/octet-stream`) or `multipart/form-data` with a field `image`.
+/// An image in which no features are found is answered 200 with no
+/// candidates, `features.total` 0 and stop kind `exhausted`. When the
+/// request's deadline passes during the search, the answer so far is sent
+/// with stop kind `deadline`. Errors are always JSON.
+#[utoipa::path(
+    post,
+    path = "/localize",
+    tag = "localize",
+    params(LocalizeParams),
+    request_body(
+        description = "The query image (JPEG, PNG, BMP, TIFF, WebP, PNM), raw or as multipart field `image`.",
+        content(
+            (Binary = "image/jpeg"),
+            (Binary = "image/png"),
+            (Binary = "application/octet-stream"),
+            (ImageUpload = "multipart/form-data"),
+        ),
+    ),
+    responses(
+        (status = 200, description = "Candidates best first, with features used, stop and timings.",
+            content(
+                (Localization = "application/json"),
+                (Binary = "application/x-protobuf"),
+            )),
+        (status = 400, description = "Bad parameter (`invalid_parameter`, `unknown_rule`), empty body (`empty_body`), bad multipart (`invalid_multipart`, also for two fields `image`; `missing_image_field`).", body = ErrorBody),
+        (status = 413, description = "Body over `limits.body_bytes` (`body_too_large`).", body = ErrorBody),
+        (status = 415, description = "Content type not accepted (`unsupported_media_type`), or an image format other than JPEG, PNG, BMP, TIFF, WebP and PNM, e.g. GIF (`unsupported_image_format`).", body = ErrorBody),
+        (status = 422, description = "Not a decodable image (`undecodable_image`), more pixels than `limits.pixels` (`image_too_large`), extraction failed (`extraction_failed`).", body = ErrorBody),
+        (status = 408, description = "The body was still arriving at the request's deadline (`request_timeout`), or stopped arriving for `server.body_timeout_ms` (`body_timeout`).", body = ErrorBody),
+        (status = 431, description = "More header fields than `limits.headers`, or more header bytes than `limits.header_bytes` (`headers_too_large`).", body = ErrorBody),
+        (status = 503, description = "Map not loaded yet (`not_ready`), all workers busy and queue full (`overloaded`), no worker free before the deadline (`queue_timeout`), or the deadline passed before the search voted a feature (`deadline_exceeded`); see Retry-After.", body = ErrorBody,
+            headers(("Retry-After" = u32, description = "Seconds to wait before retrying."))),
+    )
+)]
+pub async fn localize(
+    State(state): State<Arc<AppState>>,
+    RawQuery(query): RawQuery,
+    request: Request,
+) -> Result<Response, ApiError> {
+    let arrived = Instant::now();
+    let deadline = arrived + state.config.deadline();
+    let localizer = state.localizer()?;
+    let format = Format::from_accept(request.headers());
+    let params = LocalizeParams::from_query(query.as_deref())?;
+    let sequence = params.sequence()?;
+    let frame = params.frame()?;
+    let near = params.near()?;
+    let snapshot = localizer.map.snapshot();
+    let mut defaults = std::borrow::Cow::Borrowed(&state.defaults);
+    if sequence.is_some() && !params.names_a_rule() {
+        // a frame of a sequence stops by the sequence's rule
+        let q = &state.config.sequence;
+        let d = defaults.to_mut();
+        d.options.rule = q
+            .rule()
+            .map_err(|e| ApiError::internal(format!("sequence.rule: {e}")))?;
+        d.options.min_features = q.min_features.resolve(snapshot.auto_warmup());
+    }
+    let mut options = params.options(&defaults)?;
+    let asked = params.tiles()?;
+    let tiles = localizer.grid_for(&options.rule, asked);
+    let rule = options.rule.clone();
+    let verify = params.verify(state.config.verify.enabled)?;
+    let tracing = params.tracing()?;
+    options.deadline = Some(deadline);
+    let model = state.config.sequence.model();
+    let allowed = match near {
+        Some(n) => Some(n.images(&*snapshot).ok_or_else(|| {
+            ApiError::invalid_parameter("near", "the map has no poses with fields x and y")
+        })?),
+        None => None,
+    };
+    let images = snapshot.id_range();
+    if sequence.is_none() {
+        // a single query's prior: the images near= allows, else — for the
+        // `posterior` rule — uniform, weighing votes at the configured κ
+        options.prior = match &allowed {
+            Some(ids) => Some(Arc::new(Prior::only(
+                images,
+                ids.iter().copied(),
+                model.kappa,
+            ))),
+            None if options.rule.name == "posterior" => Some(Arc::new(model.uniform_prior(images))),
+            None => None,
+        };
+    }
+    let image = receive_image(&state, request, deadline, localizer.limits).await?;
+    // A frame of a sequence holds its sequence's lock from prediction to
+    // update, so frames of one sequence apply one at a time.
+    let mut held = None;
+    if let Some(name) = sequence {
+        let topology = state.topology()?;
+        let slot = state.sequences.slot(name);
+        let mut filter = tokio::time::timeout_at(deadline.into(), slot.lock_owned())
+            .await
+            .map_err(|_| ApiError::queue_timeout())?;
+        let prediction = filter.predict(&model, topology, frame);
+        let prior = match &allowed {
+            Some(ids) => Prior::new(
+                images,
+                ids.iter().map(|&j| (j, prediction.prior.of(j))).collect(),
+                0.0,
+                model.kappa,
+            )
+            .keeping(model.track)
+            .with_window(prediction.prior.window),
+            None => prediction.prior.clone(),
+        };
+        options.prior = Some(Arc::new(prior));
+        held = Some((name, filter, prediction));
+    }
+    let top_n = options.top_n;
+    let worker_localizer = localizer.clone();
+    let answer = state
+        .on_worker(deadline, "localization", move || {
+            if Instant::now() >= deadline {
+                return Err(ApiError::deadline_exceeded()); // no work for a lost cause
+            }
+            Ok(worker_localizer.localize_traced(&image, &options, tiles, verify, tracing)?)
+        })
+        .await?;
+    if answer.stop.kind == crate::search::StopKind::Deadline && answer.features.used == 0 {
+        return Err(ApiError::deadline_exceeded()); // the deadline passed before any vote
+    }
+    localizer.learn(&rule, asked, &answer);
+    if let Some(choice) = &localizer.coarse_choice {
+        super::metrics::coarse_choice(choice);
+    }
+    let mut answer = answer;
+    if let Some((name, mut filter, prediction)) = held
+        && let Some(posterior) = answer.posterior.take()
+    {
+        if let Some(r) = prediction.restart {
+            super::metrics::sequence_restarted(r.as_str());
+        }
+        filter.update(posterior, &prediction);
+        let belief = filter.belief().expect("just updated");
+        answer.sequence = Some(SequenceAnswer::new(
+            &*snapshot,
+            name,
+            &prediction,
+            filter.frames(),
+            belief,
+            top_n,
+        ));
+    }
+    super::metrics::localized(&answer);
+    let summary = LocalizeSummary {
+        features: answer.features.total,
+        fraction: answer.features.fraction,
+        candidates: answer.candidates.len(),
+    };
+    let mut response = encode(&answer, format);
+    response.extensions_mut().insert(summary);
+    Ok(response)
+}
+
+fn encode(answer: &Localization, format: Format) -> Response {
+    match format {
+        Format::Json => Json(answer).into_response(),
+        Format::Protobuf => (
+            [(
+                header::CONTENT_TYPE,
+                HeaderValue::from_static(proto::CONTENT_TYPE),
+            )],
+            proto::encode(answer),
+        )
+            .into_response(),
+    }
+}
+
+/// Forget a sequence: its next frame starts it afresh.
+#[utoipa::path(
+    delete,
+    path = "/sequences/{name}",
+    tag = "localize",
+    params(("name" = String, Path, description = "The sequence's name.")),
+    responses(
+        (status = 204, description = "The sequence was forgotten."),
+        (status = 400, description = "Not a sequence name (`invalid_parameter`).", body = ErrorBody),
+        (status = 404, description = "No such sequence is live (`unknown_sequence`).", body = ErrorBody),
+    )
+)]
+pub async fn delete_sequence(
+    State(state): State<Arc<AppState>>,
+    axum::extract::Path(name): axum::extract::Path<String>,
+) -> Result<axum::http::StatusCode, ApiError> {
+    let name =
+        super::sequences::valid_name(&name).map_err(|e| ApiError::invalid_parameter("name", e))?;
+    if state.sequences.remove(name) {
+        Ok(axum::http::StatusCode::NO_CONTENT)
+    } else {
+        Err(ApiError::new(
+            axum::http::StatusCode::NOT_FOUND,
+            "unknown_sequence",
+            format!("no sequence `{name}` is live"),
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn accept_chooses_the_format() {
+        let with = |v: &str| {
+            let mut h = HeaderMap::new();
+            h.insert(header::ACCEPT, v.parse().unwrap());
+            Format::from_accept(&h)
+        };
+        assert_eq!(Format::from_accept(&HeaderMap::new()), Format::Json);
+        assert_eq!(with("application/json"), Format::Json);
+        assert_eq!(with("*/*"), Format::Json);
+        assert_eq!(with("application/x-protobuf"), Format::Protobuf);
+        assert_eq!(
+            with("application/json;q=0.5, application/x-protobuf"),
+            Format::Protobuf
+        );
+        assert_eq!(with("application/x-protobuf;q=0"), Format::Json);
+    }
+}
