@@ -179,6 +179,31 @@ mod x86 {
     /// Descriptors per AVX2 register tile.
     const R256: usize = 6;
 
+    /// Hand `tile` the descriptors of `x` (`dim` floats each) at most `max`
+    /// at a time: how many, their floats and their rows of `best_v` /
+    /// `best_i`. The register tiles of both instruction sets share it.
+    fn by_tiles(
+        x: &[f32],
+        dim: usize,
+        max: usize,
+        best_v: &mut [f32],
+        best_i: &mut [u32],
+        mut tile: impl FnMut(usize, &[f32], &mut [f32], &mut [u32]),
+    ) {
+        let rows = x.len() / dim;
+        let mut r = 0;
+        while r < rows {
+            let n = (rows - r).min(max);
+            tile(
+                n,
+                &x[r * dim..],
+                &mut best_v[r * LANES..],
+                &mut best_i[r * LANES..],
+            );
+            r += n;
+        }
+    }
+
     #[target_feature(enable = "avx512f")]
     pub unsafe fn avx512_rows(
         x: &[f32],
@@ -189,16 +214,8 @@ mod x86 {
         best_v: &mut [f32],
         best_i: &mut [u32],
     ) {
-        let rows = x.len() / dim;
-        let mut r = 0;
-        while r < rows {
-            let n = (rows - r).min(R512);
-            let (xs, bv, bi) = (
-                &x[r * dim..],
-                &mut best_v[r * LANES..],
-                &mut best_i[r * LANES..],
-            );
-            // SAFETY: n rows remain from r; the caller checked avx512f.
+        by_tiles(x, dim, R512, best_v, best_i, |n, xs, bv, bi| {
+            // SAFETY: n rows remain in xs; the caller checked avx512f.
             unsafe {
                 match n {
                     8 => avx512_tile::<8>(xs, dim, panels, norms, first, bv, bi),
@@ -211,8 +228,7 @@ mod x86 {
                     _ => avx512_tile::<1>(xs, dim, panels, norms, first, bv, bi),
                 }
             }
-            r += n;
-        }
+        });
     }
 
     /// R descriptors against every pair of panels.
@@ -289,16 +305,8 @@ mod x86 {
         best_v: &mut [f32],
         best_i: &mut [u32],
     ) {
-        let rows = x.len() / dim;
-        let mut r = 0;
-        while r < rows {
-            let n = (rows - r).min(R256);
-            let (xs, bv, bi) = (
-                &x[r * dim..],
-                &mut best_v[r * LANES..],
-                &mut best_i[r * LANES..],
-            );
-            // SAFETY: n rows remain from r; the caller checked avx2 and fma.
+        by_tiles(x, dim, R256, best_v, best_i, |n, xs, bv, bi| {
+            // SAFETY: n rows remain in xs; the caller checked avx2 and fma.
             unsafe {
                 match n {
                     6 => avx2_tile::<6>(xs, dim, panels, norms, first, bv, bi),
@@ -309,8 +317,7 @@ mod x86 {
                     _ => avx2_tile::<1>(xs, dim, panels, norms, first, bv, bi),
                 }
             }
-            r += n;
-        }
+        });
     }
 
     /// R descriptors against every panel, each panel as two 8-lane halves.
