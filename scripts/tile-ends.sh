@@ -3,9 +3,9 @@
 # examples/tile_ends.rs (every query's state after each of its 2x2+24 tiles:
 # top-1 and top-5 right or not, place-z's statistic, decode and extraction
 # time so far against the whole image's) for vocabulary seeds 1 to 3 on both
-# shared datasets, then prints, for stops at tile ends only, the worst seed's
-# loss of recall@1 / recall@5 against the full search and the median and mean
-# time share:
+# shared datasets, then prints the median time share spent by each tile end
+# and, for stops at tile ends only, the worst seed's loss of recall@1 /
+# recall@5 against the full search and the median and mean time share:
 #   - place-z thresholds z;
 #   - a "predictive" z, z·√(t/R) (t features voted, R left): how many spreads
 #     the lead is of what the features left could still move it;
@@ -72,6 +72,11 @@ both = lambda stop, *keys: (evaluate(gp, stop, *keys), evaluate(rt, stop, *keys)
 print("stops at tile ends only; loss: worst seed, points of recall@1 or recall@5; "
       "time: median / mean share of the whole image's decode + extraction")
 show("full search (all four tiles)", *both(lambda e, i: False))
+for name, rows in (("gardens-point", gp), ("rtabmap-loop", rt)):
+    spent = [statistics.median(ends[i]["time_share"] for ends in rows.values() if len(ends) > i)
+             for i in range(4)]
+    print(f"  {name}: median time share spent by the end of tile 1, 2, 3, 4: "
+          + ", ".join(f"{t:.3f}" for t in spent))
 for z in (1, 1.5, 2, 2.5, 3):
     show(f"place-z {z}", *both(lambda e, i, z=z: e[i]["z"] > z))
 def predictive(e, i):
