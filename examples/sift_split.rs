@@ -1,21 +1,20 @@
-//! Where SIFT's time goes: for the first 40 images of a folder (at the
-//! service's 640 px, its SIFT parameters, one OpenCV thread), the median time
-//! of OpenCV's whole `detectAndCompute`, of detection alone (scale space,
-//! extrema, orientations), and of describing given keypoints (all of them,
-//! then every second one), which builds the Gaussian pyramid again. It
-//! bounds what describing keypoints on demand, as the voter asks for them,
-//! could save (docs/performance.md, "Where SIFT's time goes").
+//! Where SIFT's time goes: for the first 40 images of a folder, decoded
+//! and downscaled as the service does (its 640 px frame, its SIFT
+//! parameters, one OpenCV thread), the median time of OpenCV's whole
+//! `detectAndCompute`, of detection alone (scale space, extrema,
+//! orientations), and of describing given keypoints (all of them, then every
+//! second one), which builds the Gaussian pyramid again. It bounds what
+//! describing keypoints on demand, as the voter asks for them, could save
+//! (docs/performance.md, "Where SIFT's time goes").
 //!
 //! ```sh
 //! cargo run --release --example sift_split -- ../shared/datasets/gardens-point/day_left
 //! ```
 
 use bowloc::eval::machine::cpu_from;
-use bowloc::features::ExtractConfig;
-use opencv::core::{KeyPoint, Mat, Size, Vector, no_array};
-use opencv::features2d::SIFT;
+use bowloc::features::{DecodeLimits, ExtractConfig, Frame, decode_file};
+use opencv::core::{KeyPoint, Mat, Vector, no_array};
 use opencv::prelude::*;
-use opencv::{imgcodecs, imgproc};
 use std::time::Instant;
 
 const IMAGES: usize = 40;
@@ -27,20 +26,13 @@ fn main() -> anyhow::Result<()> {
         .ok_or_else(|| anyhow::anyhow!("usage: sift_split IMAGE_FOLDER"))?;
     opencv::core::set_num_threads(1)?;
     let config = ExtractConfig::default();
-    let p = &config.sift;
-    let mut sift = SIFT::create(
-        0,
-        p.octave_layers as i32,
-        p.contrast_threshold,
-        p.edge_threshold,
-        p.sigma,
-    )?;
     let mut files: Vec<_> = std::fs::read_dir(&dir)?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|e| e == "jpg" || e == "png"))
         .collect();
     files.sort();
     files.truncate(IMAGES);
+    anyhow::ensure!(!files.is_empty(), "no .jpg or .png images in {dir}");
     let [
         mut whole,
         mut detect,
@@ -50,27 +42,19 @@ fn main() -> anyhow::Result<()> {
     ] = [(); 5].map(|_| Vec::<f64>::new());
     let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
     for f in &files {
-        let image = imgcodecs::imread(
-            f.to_string_lossy().into_owned(),
-            imgcodecs::IMREAD_GRAYSCALE,
-        )?;
-        let scale = config.max_side as f64 / image.cols().max(image.rows()) as f64;
-        let size = Size::new(
-            (image.cols() as f64 * scale).round() as i32,
-            (image.rows() as f64 * scale).round() as i32,
-        );
-        let mut frame = Mat::default();
-        imgproc::resize(&image, &mut frame, size, 0.0, 0.0, imgproc::INTER_AREA)?;
+        let image = decode_file(f, DecodeLimits::default(), config.max_side)?;
+        let mut frame = Frame::new(&image, &config)?;
+        let (frame, sift) = frame.parts();
         for _ in 0..RUNS {
             let (mut found, mut descriptors) = (Vector::<KeyPoint>::new(), Mat::default());
             let t = Instant::now();
-            sift.detect_and_compute(&frame, &no_array(), &mut found, &mut descriptors, false)?;
+            sift.detect_and_compute(frame, &no_array(), &mut found, &mut descriptors, false)?;
             whole.push(ms(t));
             keypoints.push(found.len() as f64);
 
             let mut detected = Vector::<KeyPoint>::new();
             let t = Instant::now();
-            sift.detect(&frame, &mut detected, &no_array())?;
+            sift.detect(frame, &mut detected, &no_array())?;
             detect.push(ms(t));
 
             for (subset, times) in [
@@ -79,7 +63,7 @@ fn main() -> anyhow::Result<()> {
             ] {
                 let (mut given, mut out) = (subset, Mat::default());
                 let t = Instant::now();
-                sift.detect_and_compute(&frame, &no_array(), &mut given, &mut out, true)?;
+                sift.detect_and_compute(frame, &no_array(), &mut given, &mut out, true)?;
                 times.push(ms(t));
             }
         }

@@ -77,6 +77,12 @@ impl Frame {
         super::corners::corners_per_core(&self.mat, cores)
     }
 
+    /// The extraction frame's pixels and the configured detector, for
+    /// measuring OpenCV's SIFT itself (`examples/sift_split.rs`).
+    pub fn parts(&mut self) -> (&Mat, &mut Ptr<SIFT>) {
+        (&self.mat, &mut self.sift)
+    }
+
     /// Width and height of the extraction frame.
     pub fn size(&self) -> (u32, u32) {
         (self.mat.cols().max(0) as u32, self.mat.rows().max(0) as u32)
