@@ -77,7 +77,7 @@ fn measure(dataset: &str, words: usize, rules: &[RuleSpec]) -> Vec<Agreement> {
         .collect()
 }
 
-/// Printed by this test on an Intel Xeon with AVX-512 (`cargo test
+/// Printed by this test on an AMD EPYC with AVX-512 (`cargo test
 /// --release --test place_z_real -- --nocapture`): see docs/results.md,
 /// "The default rule". The test asserts that the default `place-z`'s agreement
 /// differs by at most `MAX_GAP` between the maps and is at least

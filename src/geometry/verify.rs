@@ -633,6 +633,14 @@ mod tests {
         }
     }
 
+    #[test]
+    fn each_choice_lists_its_default_first() {
+        let d = VerifyParams::default();
+        assert_eq!(Model::ALL[0], d.model);
+        assert_eq!(Order::ALL[0], d.order);
+        assert_eq!(Estimator::ALL[0], d.estimator);
+    }
+
     fn pairs(q: &[[f32; 2]]) -> Correspondences {
         Correspondences {
             query: q.to_vec(),

@@ -151,6 +151,11 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_default_order_is_listed_first() {
+        assert_eq!(TileOrder::ALL[0], TileOrder::default());
+    }
+
+    #[test]
     fn is_a_permutation_fixed_by_its_seed() {
         let a = permutation(1000, 42);
         let mut sorted = a.clone();
