@@ -801,6 +801,22 @@ mod tests {
             comments.contains(&parameters),
             "config/default.toml must list the parameters as `{parameters}`"
         );
+        // the built-in rule's parameter and warm-up, as its comments state them
+        use crate::search::SearchOptions as S;
+        for stated in [
+            format!("threshold = {:?}", S::RECOMMENDED_PARAMETER),
+            format!(
+                "`{}` at z = {} after {} features",
+                S::RECOMMENDED_RULE,
+                S::RECOMMENDED_PARAMETER,
+                S::RECOMMENDED_WARMUP
+            ),
+        ] {
+            assert!(
+                comments.contains(&stated),
+                "config/default.toml must say `{stated}`"
+            );
+        }
         // every tile order, quoted
         for order in crate::search::TileOrder::ALL {
             let quoted = format!("\"{}\"", order.name());
