@@ -311,7 +311,7 @@ fn put_fields(query: Option<&str>, pose_fields: &[String]) -> Result<(String, Ve
         PutParams,
     ),
     request_body(
-        description = "The image (JPEG, PNG, BMP, TIFF, WebP, PNM), raw or as multipart field `image`.",
+        description = format!("The image ({}), raw or as multipart field `image`.", crate::features::SUPPORTED_FORMATS),
         content(
             (Binary = "image/jpeg"),
             (Binary = "image/png"),
