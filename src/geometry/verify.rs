@@ -276,6 +276,14 @@ impl VerifyParams {
         if self.top_k == 0 {
             return Err("top_k must be at least 1".into());
         }
+        let needs = self.model.min_matches();
+        if self.min_inliers <= needs {
+            return Err(format!(
+                "min_inliers must be more than the {needs} pairs a {} fit takes (any {needs} agree with the model fitted to them), got {}",
+                self.model.name(),
+                self.min_inliers
+            ));
+        }
         if self.max_word_pairs == 0 {
             return Err("max_word_pairs must be at least 1".into());
         }
@@ -481,6 +489,10 @@ impl LeaderCheck for LeaderVerifier<'_> {
 
     fn max_log_scale(&self) -> f32 {
         self.params.stop_log_scale
+    }
+
+    fn fit_needs(&self) -> usize {
+        self.params.model.min_matches()
     }
 }
 
@@ -863,6 +875,17 @@ mod tests {
             },
             VerifyParams {
                 confidence: 1.0,
+                ..Default::default()
+            },
+            // a homography fits any 4 pairs, a fundamental matrix any 8
+            VerifyParams {
+                model: Model::Homography,
+                min_inliers: 4,
+                ..Default::default()
+            },
+            VerifyParams {
+                model: Model::Fundamental,
+                min_inliers: 8,
                 ..Default::default()
             },
         ] {

@@ -92,6 +92,13 @@ pub trait LeaderCheck {
     fn max_log_scale(&self) -> f32 {
         MAX_LOG_SCALE
     }
+
+    /// Pairs the model's fit takes: any that many agree with the model
+    /// fitted to them, so only inliers beyond them are evidence, and a stop
+    /// asks for at least one more whatever its m (0: no such floor).
+    fn fit_needs(&self) -> usize {
+        0
+    }
 }
 
 /// The first answer of a [`LeaderCheck::answer`].
@@ -128,7 +135,8 @@ impl CheckedAnswer {
 /// the voter's top `candidates` handed to `checker`, which verifies and
 /// re-ranks them as the final answer is. Returns that answer (`None` without
 /// candidates) and, when it is verified with at least `min_inliers` inliers
-/// at the query's scale, why the search stops.
+/// (and more than [`LeaderCheck::fit_needs`]) at the query's scale, why the
+/// search stops.
 fn check_answer(
     voter: &dyn VoteStats,
     voted: &[Voted],
@@ -143,6 +151,7 @@ fn check_answer(
         .map(|&(h, id)| (id, h))
         .collect();
     let answer = checker.answer(&top, voted)?;
+    let min_inliers = min_inliers.max(checker.fit_needs() + 1);
     let why = answer
         .verified_at_scale(min_inliers, checker.max_log_scale())
         .then(|| {

@@ -486,14 +486,16 @@ fn verified_stops_on_the_checked_answer_at_the_query_scale_not_only_the_leader()
     assert_eq!(c.calls, s.len());
 }
 
-/// A [`FakeCheck`] whose verification settings bound the query's scale at
-/// `max_log_scale`.
-struct ScaleBound {
+/// A [`FakeCheck`] with the bounds a real checker takes from its
+/// verification settings: the query's scale, and the pairs the model's fit
+/// takes.
+struct Bounds {
     check: FakeCheck,
     max_log_scale: f32,
+    fit_needs: usize,
 }
 
-impl LeaderCheck for ScaleBound {
+impl LeaderCheck for Bounds {
     fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize {
         self.check.inliers(image, voted)
     }
@@ -505,19 +507,24 @@ impl LeaderCheck for ScaleBound {
     fn max_log_scale(&self) -> f32 {
         self.max_log_scale
     }
+
+    fn fit_needs(&self) -> usize {
+        self.fit_needs
+    }
 }
 
 #[test]
 fn the_checker_says_how_far_from_the_query_scale_a_geometric_stop_may_be() {
     // ln 1.15 ≈ 0.14: within the default bound (0.2), not within 0.1
     let s = [0u32; 50];
-    let check = |max_log_scale| ScaleBound {
+    let check = |max_log_scale| Bounds {
         check: FakeCheck {
             inliers: 20,
             calls: 0,
             scale: 1.15,
         },
         max_log_scale,
+        fit_needs: 0,
     };
     for rule in [
         spec("verified", 8.0),
@@ -528,6 +535,30 @@ fn the_checker_says_how_far_from_the_query_scale_a_geometric_stop_may_be() {
         let mut c = check(0.1);
         assert_eq!(stops_with_check(&rule, &s, Some(&mut c)), None, "{rule}");
         let mut c = check(0.5);
+        assert_eq!(stops_with_check(&rule, &s, Some(&mut c)), Some(1), "{rule}");
+    }
+}
+
+#[test]
+fn a_geometric_stop_never_counts_the_pairs_a_fit_takes_as_evidence() {
+    // a homography fits any 4 pairs: 4 inliers verify nothing, whatever m
+    let s = [0u32; 50];
+    let check = |inliers| Bounds {
+        check: FakeCheck {
+            inliers,
+            calls: 0,
+            scale: 1.0,
+        },
+        max_log_scale: MAX_LOG_SCALE,
+        fit_needs: 4,
+    };
+    for rule in [
+        spec("verified", 4.0),
+        spec("stable-peak", 1000.0).or_verified(Some(4.0)).unwrap(),
+    ] {
+        let mut c = check(4);
+        assert_eq!(stops_with_check(&rule, &s, Some(&mut c)), None, "{rule}");
+        let mut c = check(5);
         assert_eq!(stops_with_check(&rule, &s, Some(&mut c)), Some(1), "{rule}");
     }
 }

@@ -32,7 +32,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "verified",
     parameter: Some(Parameter {
         name: "inliers",
-        meaning: "m, the inliers that verify the answer (more than the model's fit needs: 2 points for a similarity, 4 for a homography)",
+        meaning: "m, the inliers that verify the answer (and always more than the pairs the model's fit takes, which agree with it by construction: 2 for a similarity, 4 for a homography, 8 for a fundamental matrix)",
         range: Range::Whole { min: 4, max: 1000 },
         example: 12.0,
     }),

@@ -7,8 +7,12 @@
 
 use axum::http::{HeaderValue, header};
 use axum::response::{IntoResponse, Response};
+use std::sync::LazyLock;
 
-const INDEX: &str = include_str!("index.html");
+/// The page, with the image formats the service decodes filled in.
+static INDEX: LazyLock<String> = LazyLock::new(|| {
+    include_str!("index.html").replace("{formats}", crate::features::SUPPORTED_FORMATS)
+});
 const SCRIPT: &str = include_str!("page.js");
 const STYLE: &str = include_str!("page.css");
 
@@ -40,7 +44,7 @@ fn asset(content_type: &'static str, body: &'static str) -> Response {
     responses((status = 200, description = "The HTML page (its script and style are `/page.js` and `/page.css`).",
         content((String = "text/html")))))]
 pub async fn index() -> Response {
-    asset("text/html; charset=utf-8", INDEX)
+    asset("text/html; charset=utf-8", &INDEX)
 }
 
 /// The page's script.
@@ -55,4 +59,15 @@ pub async fn script() -> Response {
     responses((status = 200, description = "CSS of the page.", content((String = "text/css")))))]
 pub async fn style() -> Response {
     asset("text/css; charset=utf-8", STYLE)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_page_names_the_formats_the_service_decodes() {
+        assert!(INDEX.contains(crate::features::SUPPORTED_FORMATS));
+        assert!(!INDEX.contains("{formats}"));
+    }
 }
