@@ -328,7 +328,7 @@ fn put_fields(query: Option<&str>, pose_fields: &[String]) -> Result<(String, Ve
         (status = 403, description = "Wrong token (`forbidden`), or no token configured (`writes_disabled`).", body = ErrorBody),
         (status = 409, description = "Another request is writing this id (`write_conflict`).", body = ErrorBody),
         (status = 413, description = "Body over `limits.body_bytes` (`body_too_large`).", body = ErrorBody),
-        (status = 415, description = "Content type not accepted (`unsupported_media_type`) or image format not supported (`unsupported_image_format`).", body = ErrorBody),
+        (status = 415, description = format!("Content type not accepted (`unsupported_media_type`), or an image format other than {}, e.g. GIF (`unsupported_image_format`).", crate::features::SUPPORTED_FORMATS), body = ErrorBody),
         (status = 422, description = "Not a decodable image (`undecodable_image`), too many pixels (`image_too_large`), extraction failed (`extraction_failed`).", body = ErrorBody),
         (status = 408, description = "The body did not arrive in time (`request_timeout`, `body_timeout`).", body = ErrorBody),
         (status = 431, description = "Headers over the limits (`headers_too_large`).", body = ErrorBody),
