@@ -146,6 +146,22 @@ async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiErro
     }
 }
 
+/// OpenAPI: the description of an image body, `subject` naming the image.
+pub(super) fn image_body_description(subject: &str) -> String {
+    format!(
+        "{subject} ({}), raw or as multipart field `image`.",
+        crate::features::SUPPORTED_FORMATS
+    )
+}
+
+/// OpenAPI: the description of the 415 answer to an image body.
+pub(super) fn unsupported_description() -> String {
+    format!(
+        "Content type not accepted (`unsupported_media_type`), or an image format other than {}, e.g. GIF (`unsupported_image_format`).",
+        crate::features::SUPPORTED_FORMATS
+    )
+}
+
 /// The multipart form of the request body (OpenAPI only).
 #[derive(utoipa::ToSchema)]
 #[allow(dead_code)]

@@ -7,7 +7,7 @@
 //! queries that start after it.
 
 use super::AppState;
-use super::body::{ImageUpload, receive_image};
+use super::body::{ImageUpload, image_body_description, receive_image, unsupported_description};
 use super::errors::{ApiError, ErrorBody};
 use super::openapi::Binary;
 use crate::index::MapRead;
@@ -311,7 +311,7 @@ fn put_fields(query: Option<&str>, pose_fields: &[String]) -> Result<(String, Ve
         PutParams,
     ),
     request_body(
-        description = format!("The image ({}), raw or as multipart field `image`.", crate::features::SUPPORTED_FORMATS),
+        description = image_body_description("The image"),
         content(
             (Binary = "image/jpeg"),
             (Binary = "image/png"),
@@ -328,7 +328,7 @@ fn put_fields(query: Option<&str>, pose_fields: &[String]) -> Result<(String, Ve
         (status = 403, description = "Wrong token (`forbidden`), or no token configured (`writes_disabled`).", body = ErrorBody),
         (status = 409, description = "Another request is writing this id (`write_conflict`).", body = ErrorBody),
         (status = 413, description = "Body over `limits.body_bytes` (`body_too_large`).", body = ErrorBody),
-        (status = 415, description = format!("Content type not accepted (`unsupported_media_type`), or an image format other than {}, e.g. GIF (`unsupported_image_format`).", crate::features::SUPPORTED_FORMATS), body = ErrorBody),
+        (status = 415, description = unsupported_description(), body = ErrorBody),
         (status = 422, description = "Not a decodable image (`undecodable_image`), too many pixels (`image_too_large`), extraction failed (`extraction_failed`).", body = ErrorBody),
         (status = 408, description = "The body did not arrive in time (`request_timeout`, `body_timeout`).", body = ErrorBody),
         (status = 431, description = "Headers over the limits (`headers_too_large`).", body = ErrorBody),

@@ -8,7 +8,7 @@ mod params;
 pub use params::{Defaults, LocalizeParams, Near};
 
 use super::AppState;
-use super::body::{ImageUpload, receive_image};
+use super::body::{ImageUpload, image_body_description, receive_image, unsupported_description};
 use super::errors::{ApiError, ErrorBody};
 use super::openapi::Binary;
 use super::proto;
@@ -78,7 +78,7 @@ pub struct LocalizeSummary {
     tag = "localize",
     params(LocalizeParams),
     request_body(
-        description = format!("The query image ({}), raw or as multipart field `image`.", crate::features::SUPPORTED_FORMATS),
+        description = image_body_description("The query image"),
         content(
             (Binary = "image/jpeg"),
             (Binary = "image/png"),
@@ -94,7 +94,7 @@ pub struct LocalizeSummary {
             )),
         (status = 400, description = "Bad parameter (`invalid_parameter`, `unknown_rule`), empty body (`empty_body`), bad multipart (`invalid_multipart`, also for two fields `image`; `missing_image_field`).", body = ErrorBody),
         (status = 413, description = "Body over `limits.body_bytes` (`body_too_large`).", body = ErrorBody),
-        (status = 415, description = format!("Content type not accepted (`unsupported_media_type`), or an image format other than {}, e.g. GIF (`unsupported_image_format`).", crate::features::SUPPORTED_FORMATS), body = ErrorBody),
+        (status = 415, description = unsupported_description(), body = ErrorBody),
         (status = 422, description = "Not a decodable image (`undecodable_image`), more pixels than `limits.pixels` (`image_too_large`), extraction failed (`extraction_failed`).", body = ErrorBody),
         (status = 408, description = "The body was still arriving at the request's deadline (`request_timeout`), or stopped arriving for `server.body_timeout_ms` (`body_timeout`).", body = ErrorBody),
         (status = 431, description = "More header fields than `limits.headers`, or more header bytes than `limits.header_bytes` (`headers_too_large`).", body = ErrorBody),
