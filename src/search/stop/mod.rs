@@ -131,6 +131,12 @@ impl CheckedAnswer {
     }
 }
 
+/// The inliers a geometric stop asks of `checker`'s answer for an m of
+/// `min_inliers`: at least m, and more than the pairs its model's fit takes.
+fn inliers_needed(min_inliers: usize, checker: &dyn LeaderCheck) -> usize {
+    min_inliers.max(checker.fit_needs() + 1)
+}
+
 /// The geometric stop both `verified` and a vote rule's `or_verified` make:
 /// the voter's top `candidates` handed to `checker`, which verifies and
 /// re-ranks them as the final answer is. Returns that answer (`None` without
@@ -151,7 +157,7 @@ fn check_answer(
         .map(|&(h, id)| (id, h))
         .collect();
     let answer = checker.answer(&top, voted)?;
-    let min_inliers = min_inliers.max(checker.fit_needs() + 1);
+    let min_inliers = inliers_needed(min_inliers, checker);
     let why = answer
         .verified_at_scale(min_inliers, checker.max_log_scale())
         .then(|| {

@@ -561,6 +561,18 @@ fn a_geometric_stop_never_counts_the_pairs_a_fit_takes_as_evidence() {
         let mut c = check(5);
         assert_eq!(stops_with_check(&rule, &s, Some(&mut c)), Some(1), "{rule}");
     }
+    // the trace shows the inliers the check needed, not m
+    let map = one_word_per_image();
+    let view = map.view();
+    let mut voter = Voter::new(&view);
+    let mut rule = spec("verified", 4.0).build(&RuleContext::default());
+    voter.vote(0, 0);
+    let mut c = check(4);
+    assert!(
+        rule.check_with(&voter, &[VOTED_0], Some(&mut c), true)
+            .is_none()
+    );
+    assert_eq!(rule.statistic(&voter), Some((4.0, 5.0)));
 }
 
 fn stops_with_check(

@@ -25,6 +25,7 @@
 
 use super::{
     Grid, LeaderCheck, Needs, Parameter, Range, RuleInfo, StopRule, VoteStats, check_answer,
+    inliers_needed,
 };
 use crate::search::Voted;
 
@@ -32,7 +33,7 @@ pub const INFO: RuleInfo = RuleInfo {
     name: "verified",
     parameter: Some(Parameter {
         name: "inliers",
-        meaning: "m, the inliers that verify the answer (and always more than the pairs the model's fit takes, which agree with it by construction: 2 for a similarity, 4 for a homography, 8 for a fundamental matrix)",
+        meaning: "m, the inliers that verify the answer (and always more than the pairs the model's fit takes, which agree with it by construction)",
         range: Range::Whole { min: 4, max: 1000 },
         example: 12.0,
     }),
@@ -46,7 +47,7 @@ pub const INFO: RuleInfo = RuleInfo {
             min_inliers: m as usize,
             candidates: context.top_n.max(1),
             checked_at: None,
-            inliers: None,
+            last: None,
         }))
     },
 };
@@ -60,8 +61,8 @@ struct Verified {
     candidates: usize,
     /// The features voted at the last check.
     checked_at: Option<usize>,
-    /// Inliers of the last check.
-    inliers: Option<usize>,
+    /// Inliers of the last check, and the inliers it needed to stop.
+    last: Option<(usize, usize)>,
 }
 
 impl StopRule for Verified {
@@ -92,7 +93,7 @@ impl StopRule for Verified {
         }
         let (answer, why) = check_answer(voter, voted, checker, self.candidates, self.min_inliers)?;
         self.checked_at = Some(features);
-        self.inliers = Some(answer.inliers);
+        self.last = Some((answer.inliers, inliers_needed(self.min_inliers, checker)));
         why
     }
 
@@ -107,8 +108,9 @@ impl StopRule for Verified {
         self.check_with(voter, voted, leader_check, batch_end)
     }
 
-    /// The inliers of the last check, against m.
+    /// The inliers of the last check, against those it needed (m, or more
+    /// than the model's fit takes).
     fn statistic(&self, _: &dyn VoteStats) -> Option<(f64, f64)> {
-        self.inliers.map(|i| (i as f64, self.min_inliers as f64))
+        self.last.map(|(i, needed)| (i as f64, needed as f64))
     }
 }
