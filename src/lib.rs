@@ -23,8 +23,9 @@
 //!   durable change log beside the map file, compaction into a new file.
 //! - [`store`] — the memory-mapped, checksummed file format both are kept in.
 //! - [`dataset`] — the shared dataset layout (image lists, ground truth).
-//! - [`pipeline`] — glue used by every front end: extraction over image lists,
-//!   building vocabularies and maps, answering one query.
+//! - [`pipeline`] — glue used by every front end: extraction over image lists
+//!   ([`pipeline::extract`]), building vocabularies and maps
+//!   ([`pipeline::build`]), answering one query ([`pipeline::localizer`]).
 //! - [`sequence`] — frames of one moving camera localized together: the
 //!   map's topology, the motion model and the Bayes filter over map images
 //!   whose prediction is each frame's prior.
