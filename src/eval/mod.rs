@@ -42,6 +42,7 @@ pub mod verify;
 use crate::calibrate::{Warmup, auto_warmup, median_features};
 use crate::dataset::Dataset;
 use crate::features::{ExtractConfig, TileGrid, TilePlan};
+use crate::geometry::verify::VerifyParams;
 use crate::index::MapIndex;
 use crate::pipeline::progress_bar;
 use crate::search::RuleSpec;
@@ -407,84 +408,92 @@ struct SeedWords {
     costs: Vec<QueryCost>,
 }
 
-/// Run the whole evaluation and write its outputs into `config.out`.
-pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
-    let started = Instant::now();
-    let mut clock = Instant::now();
-    let mut stages = Stages::default();
-    let grids = validate(config)?;
-    let dataset = Dataset::open(&config.dataset)?;
-    let given_vocab = config
-        .vocab
-        .as_deref()
-        .map(|p| Vocabulary::open(p, true))
-        .transpose()?;
-    let extract = given_vocab
-        .as_ref()
-        .map_or(config.extract.clone(), |v| v.meta().extract.clone());
+/// The queries' descriptors as the evaluation reads them.
+struct QuerySets {
+    /// Extracted in the plan's grid.
+    plain: cache::DescriptorSet,
+    /// The same grid with the coarse pass first, when the plan learns it.
+    coarse: Option<cache::DescriptorSet>,
+    /// Extracted whole, for the whole-image full search.
+    whole: Option<cache::DescriptorSet>,
+}
 
-    let map_desc = cache::map_descriptors(&config.cache, &dataset, &extract)?;
-    let (mut query_sets, whole_desc) =
-        cache::query_descriptors_with_whole(&config.cache, &dataset, &extract, config.tiles)?;
+/// Stage 1, the queries: their descriptors in the plan's grid (and with the
+/// coarse pass, and whole), from the cache or extracted now.
+fn query_sets(
+    config: &EvalConfig,
+    dataset: &Dataset,
+    extract: &ExtractConfig,
+) -> anyhow::Result<QuerySets> {
+    let (mut sets, whole) =
+        cache::query_descriptors_with_whole(&config.cache, dataset, extract, config.tiles)?;
     // a learned coarse pass: the grid without it, then with it
-    let coarse_desc = if config.tiles.learn_coarse {
-        query_sets.pop()
+    let coarse = if config.tiles.learn_coarse {
+        sets.pop()
     } else {
         None
     };
-    let query_desc = query_sets.pop().expect("the plan's grid");
-    if let Some(with_coarse) = coarse_desc
+    let plain = sets.pop().expect("the plan's grid");
+    if let Some(with_coarse) = coarse
         .as_ref()
-        .or_else(|| config.tiles.grid.coarse.then_some(&query_desc))
+        .or_else(|| config.tiles.grid.coarse.then_some(&plain))
     {
-        let (coarse, all) = with_coarse
-            .meta()
-            .tiles
-            .iter()
-            .fold((0u64, 0u64), |(c, a), t| {
-                let first = t.first().map_or(0, |t| t.features as u64);
-                (
-                    c + first,
-                    a + t.iter().map(|t| t.features as u64).sum::<u64>(),
-                )
-            });
-        tracing::info!(
-            "coarse pass: {:.3} of the queries' keypoints (the search assumes {} before counting)",
-            coarse as f64 / all.max(1) as f64,
-            TileGrid::COARSE_SHARE
-        );
+        log_coarse_share(with_coarse);
     }
-    stages.extract_s = seconds_since(&mut clock);
-    let machine = MachineInfo::here(config.opencv.clone(), map_desc.hash(), query_desc.hash());
-    let counts: Vec<usize> = (0..query_desc.len())
-        .map(|q| query_desc.image(q).map_or(0, |d| d.nrows()))
-        .collect();
-    let auto = auto_warmup(&counts);
+    Ok(QuerySets {
+        plain,
+        coarse,
+        whole,
+    })
+}
+
+/// Log the share of the queries' keypoints the coarse pass finds.
+fn log_coarse_share(with_coarse: &cache::DescriptorSet) {
+    let (coarse, all) = with_coarse
+        .meta()
+        .tiles
+        .iter()
+        .fold((0u64, 0u64), |(c, a), t| {
+            let first = t.first().map_or(0, |t| t.features as u64);
+            (
+                c + first,
+                a + t.iter().map(|t| t.features as u64).sum::<u64>(),
+            )
+        });
+    tracing::info!(
+        "coarse pass: {:.3} of the queries' keypoints (the search assumes {} before counting)",
+        coarse as f64 / all.max(1) as f64,
+        TileGrid::COARSE_SHARE
+    );
+}
+
+/// The warm-ups asked for, `auto` resolved, each once, in order.
+fn resolve_warmups(asked: &[Warmup], auto: usize) -> Vec<usize> {
     let mut warmups: Vec<usize> = Vec::new();
-    for w in &config.warmups {
+    for w in asked {
         let w = w.resolve(auto);
         if !warmups.contains(&w) {
             warmups.push(w);
         }
     }
+    warmups
+}
 
-    let vocabs = vocabularies(
-        &config.cache,
-        config.words,
-        &config.seeds,
-        given_vocab,
-        &map_desc,
-    )?;
-    let seeds: Vec<u64> = vocabs.iter().map(|v| v.meta().seed).collect();
-    stages.vocabulary_s = seconds_since(&mut clock);
-    let maps = maps_of(&config.cache, &vocabs, &map_desc, &dataset.name)?;
-    stages.map_s = seconds_since(&mut clock);
-    // one OpenCV thread per query: the sweep already runs one query per core
-    crate::features::set_opencv_threads(1);
-    // Geometric verification as the service does it: for the `verified`
-    // stop always, for re-ranking in the `+verify` settings.
-    let verify_params = config.verify.clone().unwrap_or_default();
-    let geometry = tiles::Geometry::shared(&verify_params);
+/// Every query set quantized with each vocabulary.
+struct Words {
+    /// In the plan's grid, per seed.
+    plain: Vec<SeedWords>,
+    /// With the coarse pass first, per seed.
+    coarse: Option<Vec<SeedWords>>,
+    /// Extracted whole, per seed.
+    whole: Option<Vec<SeedWords>>,
+}
+
+/// Stage 2: each query quantized once per vocabulary (timed). Streamed
+/// queries carry the geometry the `verified` stop and re-ranking use,
+/// shared across seeds.
+fn quantize_sets(sets: &QuerySets, vocabs: &[Vocabulary], verify: &VerifyParams) -> Words {
+    let geometry = tiles::Geometry::shared(verify);
     let quantize = |set: &cache::DescriptorSet, v: &Vocabulary, what: String| {
         let (queries, costs) = quantize_queries(set, v, &what);
         SeedWords { queries, costs }
@@ -492,8 +501,8 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     let streamed = |set: &cache::DescriptorSet, what: &str| -> Vec<SeedWords> {
         vocabs
             .iter()
-            .zip(&seeds)
-            .map(|(v, s)| {
+            .map(|v| {
+                let s = v.meta().seed;
                 let mut words = quantize(set, v, format!("quantizing {what}(seed {s})"));
                 for q in &mut words.queries {
                     q.geometry = Some(geometry.clone());
@@ -502,21 +511,46 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             })
             .collect()
     };
-    let per_seed = streamed(&query_desc, "");
-    let per_seed_coarse = coarse_desc
-        .as_ref()
-        .map(|set| streamed(set, "with the coarse pass "));
-    let whole: Option<Vec<SeedWords>> = whole_desc.as_ref().map(|d| {
-        vocabs
-            .iter()
-            .zip(&seeds)
-            .map(|(v, s)| quantize(d, v, format!("quantizing whole queries (seed {s})")))
-            .collect()
-    });
-    stages.quantize_s = seconds_since(&mut clock);
+    Words {
+        plain: streamed(&sets.plain, ""),
+        coarse: sets
+            .coarse
+            .as_ref()
+            .map(|set| streamed(set, "with the coarse pass ")),
+        whole: sets.whole.as_ref().map(|d| {
+            vocabs
+                .iter()
+                .map(|v| {
+                    let s = v.meta().seed;
+                    quantize(d, v, format!("quantizing whole queries (seed {s})"))
+                })
+                .collect()
+        }),
+    }
+}
 
-    // The grids are calibrated once, on the first vocabulary, so every seed
-    // runs the same settings.
+/// The settings to sweep and where the report finds them.
+struct SweepPlan {
+    settings: Vec<sweep::Setting>,
+    calibrations: Vec<Calibration>,
+    /// The index of each `--set` setting.
+    explicit: Vec<usize>,
+    /// Each setting re-ranked by verification: (without, with).
+    verified_pairs: Vec<(usize, usize)>,
+}
+
+/// Stage 3a: the grids calibrated once, on the first vocabulary, so every
+/// seed runs the same settings; the explicit settings added; with
+/// verification, the full search and each explicit setting again,
+/// re-ranked by geometric verification.
+fn plan_sweep(
+    config: &EvalConfig,
+    grids: &[&'static RuleGrid],
+    warmups: &[usize],
+    map: &MapIndex,
+    queries: &[Query],
+    ranking: sweep::Ranking,
+) -> anyhow::Result<SweepPlan> {
     let calibrated = grids
         .iter()
         .filter(|g| matches!(g.grid, sweep::Grid::Calibrated { .. }))
@@ -525,20 +559,8 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         (calibrated * warmups.len() * config.targets.len()) as u64,
         "calibrating grids",
     );
-    let ranking = sweep::Ranking {
-        top_n: summary::TOP_N.iter().copied().max().unwrap_or(10),
-        place_window: config.place_window,
-        tile_order: config.tile_order,
-    };
-    let (mut settings, calibrations) = sweep::plan(
-        &maps[0],
-        &per_seed[0].queries,
-        &grids,
-        &warmups,
-        &config.targets,
-        ranking,
-        &bar,
-    )?;
+    let (mut settings, calibrations) =
+        sweep::plan(map, queries, grids, warmups, &config.targets, ranking, &bar)?;
     bar.finish_and_clear();
     let mut explicit = Vec::with_capacity(config.explicit.len());
     for spec in &config.explicit {
@@ -552,8 +574,6 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             });
         explicit.push(index);
     }
-    // With verification: the full search and each explicit setting again,
-    // re-ranked by geometric verification.
     let mut verified_pairs = Vec::new();
     if config.verify.is_some() {
         let mut indices = vec![0];
@@ -570,125 +590,264 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             verified_pairs.push((i, settings.len() - 1));
         }
     }
-    stages.calibrate_s = seconds_since(&mut clock);
-    tracing::info!(
-        settings = settings.len(),
-        seeds = seeds.len(),
-        runs = config.runs,
-        queries = counts.len(),
-        "sweeping"
-    );
+    Ok(SweepPlan {
+        settings,
+        calibrations,
+        explicit,
+        verified_pairs,
+    })
+}
 
+/// Outcomes indexed by seed, setting, run and query.
+type SeedSettingRuns = Vec<Vec<Vec<Vec<Outcome>>>>;
+/// Request times (ms) indexed by seed, run and query.
+type SeedRunTimes = Vec<Vec<Vec<f64>>>;
+
+/// What the sweep gave.
+struct Swept {
+    outcomes: SeedSettingRuns,
+    /// The full search's request times, per seed: what time shares are of.
+    full_ms: SeedRunTimes,
+    /// The full search on the queries extracted whole, per seed (runs ×
+    /// queries), and its request times.
+    whole: Option<(Vec<Vec<Vec<Outcome>>>, SeedRunTimes)>,
+}
+
+/// Stage 3b: every setting × vocabulary × run × query, replaying a learned
+/// coarse pass when there is one; then the full search on the queries
+/// extracted whole (what tiling changes, and what the service's
+/// `rule=none` costs).
+fn sweep_settings(
+    maps: &[MapIndex],
+    words: &Words,
+    settings: &[sweep::Setting],
+    runs: u32,
+    ranking: sweep::Ranking,
+) -> Swept {
+    let queries = words.plain.first().map_or(0, |w| w.queries.len());
     // The tiles alone advance the bar once per query, a learned coarse pass
     // (replayed in order) once per setting and run.
-    let bar = match &per_seed_coarse {
-        None => progress_bar((counts.len() * seeds.len()) as u64, "sweeping"),
+    let bar = match &words.coarse {
+        None => progress_bar((queries * maps.len()) as u64, "sweeping"),
         Some(_) => progress_bar(
-            (settings.len() * config.runs as usize * seeds.len()) as u64,
+            (settings.len() * runs as usize * maps.len()) as u64,
             "sweeping, the coarse pass learned",
         ),
     };
-    let outcomes: Vec<Vec<Vec<Vec<Outcome>>>> = maps
+    let outcomes: SeedSettingRuns = maps
         .iter()
-        .zip(&per_seed)
+        .zip(&words.plain)
         .enumerate()
-        .map(|(s, (map, plain))| match &per_seed_coarse {
-            None => sweep::run_all(map, &plain.queries, &settings, config.runs, ranking, &bar),
+        .map(|(s, (map, plain))| match &words.coarse {
+            None => sweep::run_all(map, &plain.queries, settings, runs, ranking, &bar),
             Some(coarse) => {
                 let plan = sweep::LearnedPlan {
                     plain: (&plain.queries, &plain.costs),
                     coarse: (&coarse[s].queries, &coarse[s].costs),
                 };
-                sweep::run_learned(map, plan, &settings, config.runs, ranking, &bar)
+                sweep::run_learned(map, plan, settings, runs, ranking, &bar)
             }
         })
         .collect();
     bar.finish_and_clear();
-    // the grid's tiles, without the coarse pass (an outcome adds it when it
-    // started with it)
-    let tiles_total: Vec<usize> = per_seed[0]
-        .queries
+    let full_ms = outcomes
         .iter()
-        .map(|q| (q.tiles.len() - usize::from(q.coarse_first)).max(1))
-        .collect();
-    // the full search's request times, per seed: what time shares are of
-    let full_ms: Vec<Vec<Vec<f64>>> = outcomes
-        .iter()
-        .zip(&per_seed)
+        .zip(&words.plain)
         .map(|(o, q)| summary::request_ms(&o[0], &q.costs))
         .collect();
-    // The full search on the queries extracted whole: what tiling changes,
-    // and what the service's `rule=none` costs.
-    let whole_runs: Option<Vec<Vec<Vec<Outcome>>>> = whole.as_ref().map(|whole| {
-        let bar = progress_bar(
-            (counts.len() * seeds.len()) as u64,
-            "sweeping whole queries",
-        );
-        let runs = maps
+    let whole = words.whole.as_ref().map(|whole| {
+        let bar = progress_bar((queries * maps.len()) as u64, "sweeping whole queries");
+        let runs: Vec<Vec<Vec<Outcome>>> = maps
             .iter()
             .zip(whole)
             .map(|(map, q)| {
-                let mut o =
-                    sweep::run_all(map, &q.queries, &settings[..1], config.runs, ranking, &bar);
+                let mut o = sweep::run_all(map, &q.queries, &settings[..1], runs, ranking, &bar);
                 o.swap_remove(0)
             })
             .collect();
         bar.finish_and_clear();
-        runs
+        let ms = runs
+            .iter()
+            .zip(whole)
+            .map(|(o, q)| summary::request_ms(o, &q.costs))
+            .collect();
+        (runs, ms)
     });
-    let whole_ms: Option<Vec<Vec<Vec<f64>>>> =
-        whole_runs
-            .as_ref()
-            .zip(whole.as_ref())
-            .map(|(runs, whole)| {
-                runs.iter()
-                    .zip(whole)
-                    .map(|(o, q)| summary::request_ms(o, &q.costs))
-                    .collect()
-            });
-    let summaries: Vec<SettingSummary> = settings
+    Swept {
+        outcomes,
+        full_ms,
+        whole,
+    }
+}
+
+/// One setting's runs on every seed, with the costs and full-search times
+/// its time shares need.
+fn by_seed<'a>(
+    runs: impl Iterator<Item = &'a Vec<Vec<Outcome>>>,
+    words: &'a [SeedWords],
+    swept: &'a Swept,
+) -> Vec<SeedOutcomes<'a>> {
+    runs.zip(words)
+        .zip(&swept.full_ms)
+        .enumerate()
+        .map(|(k, ((o, q), full))| SeedOutcomes {
+            runs: o,
+            costs: &q.costs,
+            full_ms: full,
+            whole_ms: swept.whole.as_ref().map(|(_, w)| &w[k][..]),
+        })
+        .collect()
+}
+
+/// Stage 4: every setting summarized over seeds and runs, and the whole-image
+/// full search apart.
+fn summarize_settings(
+    config: &EvalConfig,
+    dataset: &Dataset,
+    settings: &[sweep::Setting],
+    words: &Words,
+    swept: &Swept,
+) -> (Vec<SettingSummary>, Option<SettingSummary>) {
+    // the grid's tiles, without the coarse pass (an outcome adds it when it
+    // started with it)
+    let tiles_total: Vec<usize> = words.plain[0]
+        .queries
+        .iter()
+        .map(|q| (q.tiles.len() - usize::from(q.coarse_first)).max(1))
+        .collect();
+    let summaries = settings
         .par_iter()
         .enumerate()
         .map(|(i, s)| {
-            let by_seed: Vec<SeedOutcomes<'_>> = outcomes
-                .iter()
-                .zip(&per_seed)
-                .zip(&full_ms)
-                .enumerate()
-                .map(|(k, ((o, q), full))| SeedOutcomes {
-                    runs: &o[i],
-                    costs: &q.costs,
-                    full_ms: full,
-                    whole_ms: whole_ms.as_ref().map(|w| &w[k][..]),
-                })
-                .collect();
-            let mut summary = summary::summarize(s, &by_seed, &dataset.truth, &tiles_total);
+            let seeds = by_seed(swept.outcomes.iter().map(|o| &o[i]), &words.plain, swept);
+            let mut summary = summary::summarize(s, &seeds, &dataset.truth, &tiles_total);
             summary.at_distinct_cut = config
                 .distinct_cut
-                .map(|cut| summary::at_distinct_cut(&by_seed, &dataset.truth, cut));
+                .map(|cut| summary::at_distinct_cut(&seeds, &dataset.truth, cut));
             summary
         })
         .collect();
-    let whole_image = whole_runs.zip(whole.as_ref()).map(|(runs, whole)| {
-        let by_seed: Vec<SeedOutcomes<'_>> = runs
-            .iter()
-            .zip(whole)
-            .zip(&full_ms)
-            .enumerate()
-            .map(|(k, ((o, q), full))| SeedOutcomes {
-                runs: o,
-                costs: &q.costs,
-                full_ms: full,
-                whole_ms: whole_ms.as_ref().map(|w| &w[k][..]),
-            })
-            .collect();
-        let ones = vec![1; counts.len()];
-        let mut s = summary::summarize(&settings[0], &by_seed, &dataset.truth, &ones);
-        s.label = format!("{} (whole image)", s.label);
-        s
-    });
-    stages.sweep_s = seconds_since(&mut clock);
+    let whole_image = swept
+        .whole
+        .as_ref()
+        .zip(words.whole.as_ref())
+        .map(|((runs, _), whole)| {
+            let seeds = by_seed(runs.iter(), whole, swept);
+            let ones = vec![1; tiles_total.len()];
+            let mut s = summary::summarize(&settings[0], &seeds, &dataset.truth, &ones);
+            s.label = format!("{} (whole image)", s.label);
+            s
+        });
+    (summaries, whole_image)
+}
 
+/// The histogram of the fractions of features used under setting `index`,
+/// over every seed, run and query.
+fn histogram_of(outcomes: &SeedSettingRuns, index: usize, label: &str) -> HistogramInfo {
+    let values: Vec<f64> = outcomes
+        .iter()
+        .flat_map(|o| summary::fractions(&o[index]))
+        .collect();
+    let q = timing::quantiles(&values);
+    HistogramInfo {
+        index,
+        label: label.to_owned(),
+        bins: metrics::histogram(&values, HISTOGRAM_BINS),
+        values: values.len(),
+        mean: metrics::mean(&values),
+        median: q.median,
+        p95: q.p95,
+    }
+}
+
+/// The dataset as the report describes it.
+fn dataset_info(dataset: &Dataset, counts: &[usize], chance_at_1: f64) -> DatasetInfo {
+    DatasetInfo {
+        name: dataset.name.clone(),
+        root: dataset.root.clone(),
+        map_images: dataset.map.len(),
+        queries: dataset.queries.len(),
+        with_match: dataset.queries_with_match(),
+        ground_truth_pairs: dataset.truth.iter().map(|t| t.len()).sum(),
+        mean_features: metrics::mean(&counts.iter().map(|&n| n as f64).collect::<Vec<_>>()),
+        median_features: median_features(counts),
+        chance_recall_at_1: chance_at_1,
+    }
+}
+
+/// Run the whole evaluation and write its outputs into `config.out`.
+pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
+    let started = Instant::now();
+    let mut clock = Instant::now();
+    let mut stages = Stages::default();
+    let grids = validate(config)?;
+    let dataset = Dataset::open(&config.dataset)?;
+    let given_vocab = config
+        .vocab
+        .as_deref()
+        .map(|p| Vocabulary::open(p, true))
+        .transpose()?;
+    let extract = given_vocab
+        .as_ref()
+        .map_or(config.extract.clone(), |v| v.meta().extract.clone());
+
+    // 1. descriptors, vocabularies and maps
+    let map_desc = cache::map_descriptors(&config.cache, &dataset, &extract)?;
+    let sets = query_sets(config, &dataset, &extract)?;
+    stages.extract_s = seconds_since(&mut clock);
+    let machine = MachineInfo::here(config.opencv.clone(), map_desc.hash(), sets.plain.hash());
+    let counts: Vec<usize> = (0..sets.plain.len())
+        .map(|q| sets.plain.image(q).map_or(0, |d| d.nrows()))
+        .collect();
+    let auto = auto_warmup(&counts);
+    let warmups = resolve_warmups(&config.warmups, auto);
+    let vocabs = vocabularies(
+        &config.cache,
+        config.words,
+        &config.seeds,
+        given_vocab,
+        &map_desc,
+    )?;
+    let seeds: Vec<u64> = vocabs.iter().map(|v| v.meta().seed).collect();
+    stages.vocabulary_s = seconds_since(&mut clock);
+    let maps = maps_of(&config.cache, &vocabs, &map_desc, &dataset.name)?;
+    stages.map_s = seconds_since(&mut clock);
+
+    // 2. the queries quantized; one OpenCV thread per query (the sweep runs
+    // one query per core), geometric verification as the service does it:
+    // for the `verified` stop always, for re-ranking in the `+verify` settings
+    crate::features::set_opencv_threads(1);
+    let words = quantize_sets(&sets, &vocabs, &config.verify.clone().unwrap_or_default());
+    stages.quantize_s = seconds_since(&mut clock);
+
+    // 3. the settings planned, then swept
+    let ranking = sweep::Ranking {
+        top_n: summary::TOP_N.iter().copied().max().unwrap_or(10),
+        place_window: config.place_window,
+        tile_order: config.tile_order,
+    };
+    let plan = plan_sweep(
+        config,
+        &grids,
+        &warmups,
+        &maps[0],
+        &words.plain[0].queries,
+        ranking,
+    )?;
+    stages.calibrate_s = seconds_since(&mut clock);
+    tracing::info!(
+        settings = plan.settings.len(),
+        seeds = seeds.len(),
+        runs = config.runs,
+        queries = counts.len(),
+        "sweeping"
+    );
+    let swept = sweep_settings(&maps, &words, &plan.settings, config.runs, ranking);
+
+    // 4. summaries, and the decisions taken on them
+    let (summaries, whole_image) =
+        summarize_settings(config, &dataset, &plan.settings, &words, &swept);
+    stages.sweep_s = seconds_since(&mut clock);
     let chance_at_1 = recommend::chance_recall(&dataset.truth, dataset.map.len(), 1);
     let (recommendation, no_recommendation) =
         match recommend::recommend(&summaries, config.tolerance, chance_at_1) {
@@ -708,63 +867,39 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         &[equal_recall::PLAIN_TOLERANCE],
         Criterion::PlainRecall,
     );
-    let main_warmup = warmups[0];
     let histogram_index = match &config.histogram {
-        Some(spec) => Some(pick_setting(&summaries, spec, main_warmup)?),
+        Some(spec) => Some(pick_setting(&summaries, spec, warmups[0])?),
         None => recommendation.as_ref().map(|r| r.index),
     };
-    let histogram = histogram_index.map(|index| {
-        let values: Vec<f64> = outcomes
-            .iter()
-            .flat_map(|o| summary::fractions(&o[index]))
-            .collect();
-        let q = timing::quantiles(&values);
-        HistogramInfo {
-            index,
-            label: summaries[index].label.clone(),
-            bins: metrics::histogram(&values, HISTOGRAM_BINS),
-            values: values.len(),
-            mean: metrics::mean(&values),
-            median: q.median,
-            p95: q.p95,
-        }
-    });
+    let histogram = histogram_index.map(|i| histogram_of(&swept.outcomes, i, &summaries[i].label));
 
+    // 5. with and without verification, side by side (first vocabulary)
     let verification = config
         .verify
         .as_ref()
         .map(|params| verify::VerificationReport {
             params: params.clone(),
-            rows: verified_pairs
+            rows: plan
+                .verified_pairs
                 .iter()
                 .map(|&(without, with)| {
                     verify::row(
                         &summaries[without].label,
                         without,
-                        &outcomes[0][without],
-                        &outcomes[0][with],
+                        &swept.outcomes[0][without],
+                        &swept.outcomes[0][with],
                         &dataset.truth,
                     )
                 })
                 .collect(),
         });
     stages.verify_s = seconds_since(&mut clock);
-
-    let mean_features = metrics::mean(&counts.iter().map(|&n| n as f64).collect::<Vec<_>>());
     stages.total_s = started.elapsed().as_secs_f64();
+
+    // 6. the report and its outputs
     let report = Report {
         command: config.command.clone(),
-        dataset: DatasetInfo {
-            name: dataset.name.clone(),
-            root: dataset.root.clone(),
-            map_images: dataset.map.len(),
-            queries: dataset.queries.len(),
-            with_match: dataset.queries_with_match(),
-            ground_truth_pairs: dataset.truth.iter().map(|t| t.len()).sum(),
-            mean_features,
-            median_features: median_features(&counts),
-            chance_recall_at_1: chance_at_1,
-        },
+        dataset: dataset_info(&dataset, &counts, chance_at_1),
         config: ConfigInfo {
             runs: config.runs,
             seeds,
@@ -790,9 +925,9 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             })
             .collect(),
         stages,
-        calibrations,
+        calibrations: plan.calibrations,
         settings: summaries,
-        explicit,
+        explicit: plan.explicit,
         recommendation,
         no_recommendation,
         equal_recall,
@@ -811,7 +946,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
                     ids
                 })
                 .collect(),
-            outcomes,
+            outcomes: swept.outcomes,
         },
     };
     write_outputs(&report, &config.out, config.plots)?;
