@@ -243,6 +243,88 @@ fn pass(
     p
 }
 
+/// The sequence: the `n` queries in order, `injections` injected images
+/// evenly spaced among them (cycling through `inject_images`); and the
+/// query before which each injection comes.
+fn sequence_frames(n: usize, injections: usize, inject_images: usize) -> (Vec<Frame>, Vec<usize>) {
+    let injected_at: Vec<usize> = (0..injections)
+        .map(|k| (k + 1) * n / (injections + 1))
+        .collect();
+    let mut frames = Vec::with_capacity(n + injected_at.len());
+    for q in 0..n {
+        if let Some(k) = injected_at.iter().position(|&at| at == q) {
+            frames.push(Frame::Injected(k % inject_images.max(1)));
+        }
+        frames.push(Frame::Real(q));
+    }
+    (frames, injected_at)
+}
+
+/// The four ways the sequence is replayed: each frame alone or through the
+/// filter, by the full search or by `stop` after `min_features`.
+fn modes(stop: &RuleSpec, min_features: usize) -> [Mode; 4] {
+    let full = RuleSpec::new("none", None).expect("built-in rule");
+    let mode = |filter, rule: &RuleSpec, min_features| Mode {
+        filter,
+        rule: rule.clone(),
+        min_features,
+    };
+    [
+        mode(false, &full, 0),
+        mode(false, stop, min_features),
+        mode(true, &full, 0),
+        mode(true, stop, min_features),
+    ]
+}
+
+/// One mode's passes (one per run) on one vocabulary, averaged.
+fn mode_seed(seed: u64, passes: &[&Pass]) -> ModeSeed {
+    let mean =
+        |f: &dyn Fn(&Pass) -> f64| passes.iter().map(|p| f(p)).sum::<f64>() / passes.len() as f64;
+    ModeSeed {
+        seed,
+        recall_at_1: mean(&|p| p.hits1 as f64 / p.scored.max(1) as f64),
+        recall_at_5: mean(&|p| p.hits5 as f64 / p.scored.max(1) as f64),
+        features: mean(&|p| p.features / p.frames.max(1) as f64),
+        tiles: mean(&|p| p.tiles / p.frames.max(1) as f64),
+        recovery: passes
+            .iter()
+            .flat_map(|p| p.recovery.iter().copied())
+            .collect(),
+    }
+}
+
+/// One mode over every vocabulary seed: means ± spread, and the frames it
+/// took to recover after each injection (when it always recovered).
+fn mode_report(mode: &Mode, seeds: Vec<ModeSeed>) -> ModeReport {
+    let col = |f: fn(&ModeSeed) -> f64| Spread::of(&seeds.iter().map(f).collect::<Vec<_>>());
+    let recoveries: Vec<Option<usize>> = seeds
+        .iter()
+        .flat_map(|s| s.recovery.iter().copied())
+        .collect();
+    let all: Option<Vec<usize>> = recoveries.iter().copied().collect();
+    let all = all.filter(|a| !a.is_empty());
+    let rule = if mode.rule.name == "none" {
+        "full".to_owned()
+    } else {
+        format!("{} w={}", mode.rule, mode.min_features)
+    };
+    ModeReport {
+        mode: format!("{}, {rule}", if mode.filter { "filter" } else { "frame" }),
+        filter: mode.filter,
+        rule,
+        recall_at_1: col(|s| s.recall_at_1),
+        recall_at_5: col(|s| s.recall_at_5),
+        features: col(|s| s.features),
+        tiles: col(|s| s.tiles),
+        recovery_max: all.as_ref().and_then(|a| a.iter().copied().max()),
+        recovery_mean: all
+            .as_ref()
+            .map(|a| a.iter().sum::<usize>() as f64 / a.len() as f64),
+        per_seed: seeds,
+    }
+}
+
 /// Run the sequence evaluation, write its outputs, and return it.
 pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
     config.model.check().map_err(anyhow::Error::msg)?;
@@ -287,43 +369,10 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
         .collect();
     let min_features = config.min_features.resolve(auto_warmup(&map_counts));
 
-    // the sequence: queries in order, injections evenly spaced
     let n = dataset.queries.len();
-    let injected_at: Vec<usize> = (0..config.injections)
-        .map(|k| (k + 1) * n / (config.injections + 1))
-        .collect();
-    let mut frames = Vec::with_capacity(n + injected_at.len());
-    for q in 0..n {
-        if let Some(k) = injected_at.iter().position(|&at| at == q) {
-            frames.push(Frame::Injected(k % inject_images.len().max(1)));
-        }
-        frames.push(Frame::Real(q));
-    }
+    let (frames, injected_at) = sequence_frames(n, config.injections, inject_images.len());
     let truth: Vec<HashSet<u32>> = dataset.truth.clone();
-
-    let full = RuleSpec::new("none", None).expect("built-in rule");
-    let modes = [
-        Mode {
-            filter: false,
-            rule: full.clone(),
-            min_features: 0,
-        },
-        Mode {
-            filter: false,
-            rule: config.stop.clone(),
-            min_features,
-        },
-        Mode {
-            filter: true,
-            rule: full,
-            min_features: 0,
-        },
-        Mode {
-            filter: true,
-            rule: config.stop.clone(),
-            min_features,
-        },
-    ];
+    let modes = modes(&config.stop, min_features);
     let geometry = Geometry::shared(&config.verify);
     let mut per_mode: Vec<Vec<ModeSeed>> = vec![Vec::new(); modes.len()];
     for (v, map) in vocabs.iter().zip(&maps) {
@@ -358,54 +407,13 @@ pub fn run(config: &SequenceEvalConfig) -> anyhow::Result<SequenceReport> {
             .collect();
         for (m, mode_seeds) in per_mode.iter_mut().enumerate() {
             let mine: Vec<&Pass> = passes.iter().filter(|e| e.0 == m).map(|e| &e.1).collect();
-            let mean = |f: &dyn Fn(&Pass) -> f64| {
-                mine.iter().map(|p| f(p)).sum::<f64>() / mine.len() as f64
-            };
-            mode_seeds.push(ModeSeed {
-                seed,
-                recall_at_1: mean(&|p| p.hits1 as f64 / p.scored.max(1) as f64),
-                recall_at_5: mean(&|p| p.hits5 as f64 / p.scored.max(1) as f64),
-                features: mean(&|p| p.features / p.frames.max(1) as f64),
-                tiles: mean(&|p| p.tiles / p.frames.max(1) as f64),
-                recovery: mine
-                    .iter()
-                    .flat_map(|p| p.recovery.iter().copied())
-                    .collect(),
-            });
+            mode_seeds.push(mode_seed(seed, &mine));
         }
     }
     let reports: Vec<ModeReport> = modes
         .iter()
         .zip(per_mode)
-        .map(|(mode, seeds)| {
-            let col =
-                |f: fn(&ModeSeed) -> f64| Spread::of(&seeds.iter().map(f).collect::<Vec<_>>());
-            let recoveries: Vec<Option<usize>> = seeds
-                .iter()
-                .flat_map(|s| s.recovery.iter().copied())
-                .collect();
-            let all: Option<Vec<usize>> = recoveries.iter().copied().collect();
-            let all = all.filter(|a| !a.is_empty());
-            let rule = if mode.rule.name == "none" {
-                "full".to_owned()
-            } else {
-                format!("{} w={}", mode.rule, mode.min_features)
-            };
-            ModeReport {
-                mode: format!("{}, {rule}", if mode.filter { "filter" } else { "frame" }),
-                filter: mode.filter,
-                rule,
-                recall_at_1: col(|s| s.recall_at_1),
-                recall_at_5: col(|s| s.recall_at_5),
-                features: col(|s| s.features),
-                tiles: col(|s| s.tiles),
-                recovery_max: all.as_ref().and_then(|a| a.iter().copied().max()),
-                recovery_mean: all
-                    .as_ref()
-                    .map(|a| a.iter().sum::<usize>() as f64 / a.len() as f64),
-                per_seed: seeds,
-            }
-        })
+        .map(|(mode, seeds)| mode_report(mode, seeds))
         .collect();
     let report = SequenceReport {
         command: config.command.clone(),
