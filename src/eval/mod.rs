@@ -969,3 +969,21 @@ pub fn write_outputs(report: &Report, out: &Path, plots: bool) -> anyhow::Result
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn warmups_resolve_auto_and_keep_each_once_in_order() {
+        let asked = [
+            Warmup::Features(50),
+            Warmup::Auto,
+            Warmup::Features(100),
+            Warmup::Features(50),
+        ];
+        assert_eq!(resolve_warmups(&asked, 100), vec![50, 100]);
+        assert_eq!(resolve_warmups(&asked, 30), vec![50, 30, 100]);
+        assert!(resolve_warmups(&[], 30).is_empty());
+    }
+}

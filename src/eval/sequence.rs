@@ -492,3 +492,56 @@ pub fn markdown(r: &SequenceReport) -> String {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn injections_are_spread_evenly_and_cycle_through_the_images() {
+        let (frames, at) = sequence_frames(10, 3, 2);
+        assert_eq!(at, vec![2, 5, 7]);
+        assert_eq!(frames.len(), 13);
+        let injected: Vec<(usize, usize)> = frames
+            .iter()
+            .enumerate()
+            .filter_map(|(i, f)| match f {
+                Frame::Injected(k) => Some((i, *k)),
+                Frame::Real(_) => None,
+            })
+            .collect();
+        // each injection comes just before the query it is placed at, the
+        // images taken in turn
+        assert_eq!(injected, vec![(2, 0), (6, 1), (9, 0)]);
+        let real: Vec<usize> = frames
+            .iter()
+            .filter_map(|f| match f {
+                Frame::Real(q) => Some(*q),
+                Frame::Injected(_) => None,
+            })
+            .collect();
+        assert_eq!(real, (0..10).collect::<Vec<_>>());
+        let (plain, none) = sequence_frames(4, 0, 0);
+        assert!(none.is_empty());
+        assert_eq!(plain.len(), 4);
+    }
+
+    #[test]
+    fn the_four_modes_are_each_filter_with_each_rule() {
+        let stop = RuleSpec::new("place-z", Some(2.0)).expect("a rule");
+        let m = modes(&stop, 20);
+        let seen: Vec<(bool, String, usize)> = m
+            .iter()
+            .map(|m| (m.filter, m.rule.name.to_string(), m.min_features))
+            .collect();
+        assert_eq!(
+            seen,
+            vec![
+                (false, "none".to_owned(), 0),
+                (false, "place-z".to_owned(), 20),
+                (true, "none".to_owned(), 0),
+                (true, "place-z".to_owned(), 20),
+            ]
+        );
+    }
+}
