@@ -14,7 +14,8 @@ use super::openapi::Binary;
 use super::proto;
 use crate::index::MapRead;
 use crate::report::{Localization, SequenceAnswer};
-use crate::search::Prior;
+use crate::search::{Prior, RuleSpec};
+use crate::sequence::{Filter, Prediction, SequenceModel};
 use axum::Json;
 use axum::extract::{RawQuery, Request, State};
 use axum::http::{HeaderMap, HeaderValue, header};
@@ -142,42 +143,14 @@ pub async fn localize(
     };
     let images = snapshot.id_range();
     if sequence.is_none() {
-        // a single query's prior: the images near= allows, else — for the
-        // `posterior` rule — uniform, weighing votes at the configured κ
-        options.prior = match &allowed {
-            Some(ids) => Some(Arc::new(Prior::only(
-                images,
-                ids.iter().copied(),
-                model.kappa,
-            ))),
-            None if options.rule.name == "posterior" => Some(Arc::new(model.uniform_prior(images))),
-            None => None,
-        };
+        options.prior = single_prior(allowed.as_deref(), images, &options.rule, &model);
     }
     let image = receive_image(&state, request, deadline, localizer.limits).await?;
-    // A frame of a sequence holds its sequence's lock from prediction to
-    // update, so frames of one sequence apply one at a time.
     let mut held = None;
     if let Some(name) = sequence {
-        let topology = state.topology()?;
-        let slot = state.sequences.slot(name);
-        let mut filter = tokio::time::timeout_at(deadline.into(), slot.lock_owned())
-            .await
-            .map_err(|_| ApiError::queue_timeout())?;
-        let prediction = filter.predict(&model, topology, frame);
-        let prior = match &allowed {
-            Some(ids) => Prior::new(
-                images,
-                ids.iter().map(|&j| (j, prediction.prior.of(j))).collect(),
-                0.0,
-                model.kappa,
-            )
-            .keeping(model.track)
-            .with_window(prediction.prior.window),
-            None => prediction.prior.clone(),
-        };
-        options.prior = Some(Arc::new(prior));
-        held = Some((name, filter, prediction));
+        let frame = HeldFrame::start(&state, name, frame, &model, deadline).await?;
+        options.prior = Some(Arc::new(frame.prior(allowed.as_deref(), images, &model)));
+        held = Some(frame);
     }
     let top_n = options.top_n;
     let worker_localizer = localizer.clone();
@@ -197,22 +170,8 @@ pub async fn localize(
         super::metrics::coarse_choice(choice);
     }
     let mut answer = answer;
-    if let Some((name, mut filter, prediction)) = held
-        && let Some(posterior) = answer.posterior.take()
-    {
-        if let Some(r) = prediction.restart {
-            super::metrics::sequence_restarted(r.as_str());
-        }
-        filter.update(posterior, &prediction);
-        let belief = filter.belief().expect("just updated");
-        answer.sequence = Some(SequenceAnswer::new(
-            &*snapshot,
-            name,
-            &prediction,
-            filter.frames(),
-            belief,
-            top_n,
-        ));
+    if let Some(frame) = held {
+        frame.finish(&mut answer, &*snapshot, top_n);
     }
     super::metrics::localized(&answer);
     let summary = LocalizeSummary {
@@ -223,6 +182,97 @@ pub async fn localize(
     let mut response = encode(&answer, format);
     response.extensions_mut().insert(summary);
     Ok(response)
+}
+
+/// A single query's prior: the images `near=` allows, else — for the
+/// `posterior` rule — uniform, weighing votes at the configured κ; none
+/// otherwise.
+fn single_prior(
+    allowed: Option<&[u32]>,
+    images: usize,
+    rule: &RuleSpec,
+    model: &SequenceModel,
+) -> Option<Arc<Prior>> {
+    match allowed {
+        Some(ids) => Some(Arc::new(Prior::only(
+            images,
+            ids.iter().copied(),
+            model.kappa,
+        ))),
+        None if rule.name == "posterior" => Some(Arc::new(model.uniform_prior(images))),
+        None => None,
+    }
+}
+
+/// A frame of a sequence between prediction and update. It holds its
+/// sequence's lock all that time, so frames of one sequence apply one at a
+/// time.
+struct HeldFrame<'a> {
+    name: &'a str,
+    filter: tokio::sync::OwnedMutexGuard<Filter>,
+    prediction: Prediction,
+}
+
+impl<'a> HeldFrame<'a> {
+    /// Lock the sequence `name` (made if new) before `deadline` and predict
+    /// frame `frame` from its belief.
+    async fn start(
+        state: &AppState,
+        name: &'a str,
+        frame: Option<u64>,
+        model: &SequenceModel,
+        deadline: Instant,
+    ) -> Result<Self, ApiError> {
+        let topology = state.topology()?;
+        let slot = state.sequences.slot(name);
+        let mut filter = tokio::time::timeout_at(deadline.into(), slot.lock_owned())
+            .await
+            .map_err(|_| ApiError::queue_timeout())?;
+        let prediction = filter.predict(model, topology, frame);
+        Ok(Self {
+            name,
+            filter,
+            prediction,
+        })
+    }
+
+    /// The frame's prior: the prediction, kept to the images `near=`
+    /// allows when it names some.
+    fn prior(&self, allowed: Option<&[u32]>, images: usize, model: &SequenceModel) -> Prior {
+        let predicted = &self.prediction.prior;
+        match allowed {
+            Some(ids) => Prior::new(
+                images,
+                ids.iter().map(|&j| (j, predicted.of(j))).collect(),
+                0.0,
+                model.kappa,
+            )
+            .keeping(model.track)
+            .with_window(predicted.window),
+            None => predicted.clone(),
+        }
+    }
+
+    /// Update the sequence with the answer's posterior (when the search
+    /// left one) and report the sequence's belief in the answer.
+    fn finish(mut self, answer: &mut Localization, map: &dyn MapRead, top_n: usize) {
+        let Some(posterior) = answer.posterior.take() else {
+            return;
+        };
+        if let Some(r) = self.prediction.restart {
+            super::metrics::sequence_restarted(r.as_str());
+        }
+        self.filter.update(posterior, &self.prediction);
+        let belief = self.filter.belief().expect("just updated");
+        answer.sequence = Some(SequenceAnswer::new(
+            map,
+            self.name,
+            &self.prediction,
+            self.filter.frames(),
+            belief,
+            top_n,
+        ));
+    }
 }
 
 fn encode(answer: &Localization, format: Format) -> Response {
