@@ -202,7 +202,11 @@ impl LocalizeParams {
         self.tiles
             .as_deref()
             .map(|v| {
+                // `tiles=2x2+24` typed into a URL as is arrives as "2x2 24":
+                // a query string's `+` is a space. A grid never holds a
+                // space, so it is read as the `+` that was meant.
                 v.trim()
+                    .replace(' ', "+")
                     .parse()
                     .map_err(|e: String| ApiError::invalid_parameter("tiles", e))
             })
@@ -362,6 +366,22 @@ fn number(name: &str, v: &str) -> Result<f64, ApiError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_tile_margin_sent_with_an_unescaped_plus_is_read_as_meant() {
+        let tiles = |q: &str| LocalizeParams::from_query(Some(q)).unwrap().tiles();
+        let escaped = tiles("tiles=2x2%2B24,coarse").unwrap();
+        assert_eq!(tiles("tiles=2x2+24,coarse").unwrap(), escaped);
+        let grid = escaped.expect("a grid");
+        assert_eq!(
+            (grid.cols, grid.rows, grid.margin, grid.coarse),
+            (2, 2, 24, true)
+        );
+        assert_eq!(tiles("tiles=3x3+16").unwrap().map(|g| g.margin), Some(16));
+        let e = tiles("tiles=2x2+x").unwrap_err();
+        assert_eq!((e.status.as_u16(), e.code), (400, "invalid_parameter"));
+        assert!(tiles("").unwrap().is_none());
+    }
 
     fn defaults() -> Defaults {
         Defaults {
