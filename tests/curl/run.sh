@@ -208,6 +208,9 @@ status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/loc
 check "tiles=3x2+16: the full search extracts all 6 tiles" jqt --arg s "$status" '
   $s == "200" and .tiles == {"extracted": 6, "total": 6, "grid": "3x2+16", "order": "richest"}
   and .features.extracted == .features.total and .features.used == .features.total' "$B"
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=3x2+16&seed=3")
+check "tiles=3x2+16 with its + unescaped (a space in a query string) names the same grid" jqt --arg s "$status" '
+  $s == "200" and .tiles.grid == "3x2+16" and .tiles.total == 6' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&seed=3")
 check "rule=none without tiles= extracts the image whole" jqt --arg s "$status" '
   $s == "200" and .tiles == {"extracted": 1, "total": 1, "grid": "1x1+0", "order": "richest"}
