@@ -131,25 +131,29 @@ impl CheckedAnswer {
     }
 }
 
-/// The inliers a geometric stop asks of `checker`'s answer for an m of
-/// `min_inliers`: at least m, and more than the pairs its model's fit takes.
-fn inliers_needed(min_inliers: usize, checker: &dyn LeaderCheck) -> usize {
-    min_inliers.max(checker.fit_needs() + 1)
+/// What a geometric stop's check found.
+struct GeometricCheck {
+    /// The answer's inliers.
+    inliers: usize,
+    /// The inliers it needed to stop: m, or more than the model's fit takes.
+    needed: usize,
+    /// Why the search stops, when the answer is verified.
+    why: Option<String>,
 }
 
 /// The geometric stop both `verified` and a vote rule's `or_verified` make:
 /// the voter's top `candidates` handed to `checker`, which verifies and
-/// re-ranks them as the final answer is. Returns that answer (`None` without
-/// candidates) and, when it is verified with at least `min_inliers` inliers
-/// (and more than [`LeaderCheck::fit_needs`]) at the query's scale, why the
-/// search stops.
+/// re-ranks them as the final answer is. `None` without candidates; else
+/// the answer's inliers, those it needed (at least `min_inliers`, and more
+/// than [`LeaderCheck::fit_needs`]) and, when it has them at the query's
+/// scale, why the search stops.
 fn check_answer(
     voter: &dyn VoteStats,
     voted: &[Voted],
     checker: &mut dyn LeaderCheck,
     candidates: usize,
     min_inliers: usize,
-) -> Option<(CheckedAnswer, Option<String>)> {
+) -> Option<GeometricCheck> {
     let top: Vec<(u32, f32)> = voter
         .top()
         .iter()
@@ -157,18 +161,22 @@ fn check_answer(
         .map(|&(h, id)| (id, h))
         .collect();
     let answer = checker.answer(&top, voted)?;
-    let min_inliers = inliers_needed(min_inliers, checker);
+    let needed = min_inliers.max(checker.fit_needs() + 1);
     let why = answer
-        .verified_at_scale(min_inliers, checker.max_log_scale())
+        .verified_at_scale(needed, checker.max_log_scale())
         .then(|| {
             format!(
-                "answer {} verified at the query's scale: {} inliers ≥ {min_inliers}, scale {:.2}",
+                "answer {} verified at the query's scale: {} inliers ≥ {needed}, scale {:.2}",
                 answer.id,
                 answer.inliers,
                 answer.scale.unwrap_or(0.0)
             )
         });
-    Some((answer, why))
+    Some(GeometricCheck {
+        inliers: answer.inliers,
+        needed,
+        why,
+    })
 }
 
 /// What a rule may know about the search it runs in.

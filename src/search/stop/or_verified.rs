@@ -75,6 +75,6 @@ impl StopRule for OrVerified {
             return None;
         }
         let checker = leader_check?;
-        check_answer(voter, voted, checker, self.candidates, self.min_inliers)?.1
+        check_answer(voter, voted, checker, self.candidates, self.min_inliers)?.why
     }
 }

@@ -25,7 +25,6 @@
 
 use super::{
     Grid, LeaderCheck, Needs, Parameter, Range, RuleInfo, StopRule, VoteStats, check_answer,
-    inliers_needed,
 };
 use crate::search::Voted;
 
@@ -91,10 +90,10 @@ impl StopRule for Verified {
         {
             return None;
         }
-        let (answer, why) = check_answer(voter, voted, checker, self.candidates, self.min_inliers)?;
+        let check = check_answer(voter, voted, checker, self.candidates, self.min_inliers)?;
         self.checked_at = Some(features);
-        self.last = Some((answer.inliers, inliers_needed(self.min_inliers, checker)));
-        why
+        self.last = Some((check.inliers, check.needed));
+        check.why
     }
 
     /// A geometric rule: the coarse pass is checked as any tile.
