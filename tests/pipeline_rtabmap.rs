@@ -260,6 +260,33 @@ fn cli_reports_bad_input_clearly() {
     ]);
     assert!(!ok && err.contains("built with vocabulary"), "{err}");
 
+    // a missing map is named, and why, once
+    let (ok, err) = run(&[
+        "query",
+        "--vocab",
+        &p("v.bowvoc"),
+        "--map",
+        &p("gone.bowmap"),
+        &query,
+    ]);
+    assert!(!ok && err.contains("gone.bowmap"), "{err}");
+    assert_eq!(err.matches("os error").count(), 1, "{err}");
+
+    // without --vocab and --map, the service's default files; where they
+    // are missing (no `make run` here), the error says how to get them
+    let out = bowloc()
+        .current_dir(d)
+        .args(["query", &query])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && err.contains("data/default/vocab.bowvoc")
+            && err.contains("make run"),
+        "{err}"
+    );
+
     // and the good pair answers with JSON
     let out = bowloc()
         .args([

@@ -6,17 +6,18 @@ use bowloc::index::MapRead;
 use bowloc::pipeline::Localizer;
 use bowloc::report::SequenceAnswer;
 use bowloc::sequence::{Filter, Topology, TopologyKind};
+use bowloc::server::config::FilesConfig;
 use clap::Args;
 use std::path::PathBuf;
 use std::sync::Arc;
 
 #[derive(Args)]
 pub struct QueryArgs {
-    /// Vocabulary file.
-    #[arg(long)]
+    /// Vocabulary file (the service's by default, built by `make run`).
+    #[arg(long, default_value_os_t = FilesConfig::default().vocabulary)]
     vocab: PathBuf,
-    /// Map file.
-    #[arg(long)]
+    /// Map file, built with that vocabulary (the service's by default).
+    #[arg(long, default_value_os_t = FilesConfig::default().map)]
     map: PathBuf,
     /// Query images.
     #[arg(required = true)]
@@ -41,6 +42,16 @@ pub struct QueryArgs {
 }
 
 pub fn run(a: QueryArgs) -> anyhow::Result<()> {
+    let defaults = FilesConfig::default();
+    for (given, default) in [(&a.vocab, &defaults.vocabulary), (&a.map, &defaults.map)] {
+        if given == default && !given.exists() {
+            anyhow::bail!(
+                "{}: no such file; `make run` builds the default vocabulary and map, \
+                 or give --vocab and --map",
+                given.display()
+            );
+        }
+    }
     let mut localizer = Localizer::open(&a.vocab, &a.map, true)?;
     localizer.tiles = TileGrid::DEFAULT;
     localizer.set_verify(a.verify.params()?);

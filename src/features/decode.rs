@@ -204,9 +204,9 @@ pub fn decode_file(
     limits: DecodeLimits,
     frame_side: u32,
 ) -> Result<GrayImage, FeatureError> {
-    let bytes = std::fs::read(path).map_err(|source| FeatureError::Read {
+    let bytes = std::fs::read(path).map_err(|cause| FeatureError::Read {
         path: path.to_path_buf(),
-        source,
+        cause,
     })?;
     decode(&bytes, limits, frame_side)
 }

@@ -31,11 +31,11 @@ pub enum FeatureError {
     Unsupported(String),
     #[error("image of {width}×{height} pixels exceeds the limit of {limit} pixels")]
     TooLarge { width: u64, height: u64, limit: u64 },
-    #[error("{path}: {source}")]
+    /// (The I/O error is in the message only, as in [`crate::store::StoreError::Io`].)
+    #[error("{path}: {cause}")]
     Read {
         path: std::path::PathBuf,
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error("feature extraction failed: {0}")]
     OpenCv(String),

@@ -84,19 +84,20 @@ pub struct Parsed {
 /// A log that cannot be read at all.
 #[derive(Debug, thiserror::Error)]
 pub enum LogError {
-    #[error("{path}: {source}")]
+    /// (The I/O error is in the message only, as in [`crate::store::StoreError::Io`].)
+    #[error("{path}: {cause}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error("{0}")]
     Invalid(String),
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> LogError + '_ {
-    move |source| LogError::Io {
+    move |cause| LogError::Io {
         path: path.to_path_buf(),
-        source,
+        cause,
     }
 }
 
