@@ -185,7 +185,11 @@ impl LocalizeParams {
             if !(0.0..=f32::MAX as f64).contains(&s) {
                 return Err(ApiError::invalid_parameter(
                     "min_score",
-                    format!("must be a number in 0..={}, got {s}", f32::MAX),
+                    format!(
+                        "must be a number ≥ 0 (at most {:e}), got `{}`",
+                        f32::MAX,
+                        v.trim()
+                    ),
                 ));
             }
             o.min_score = s as f32;
