@@ -1,3 +1,7 @@
+//! A live map against a map built from scratch (changes between
+//! compactions, compaction, maps without stored features, bad changes), its
+//! change log across restarts, torn tails and crashes, and its ids and names.
+
 use super::*;
 use crate::geometry::Keypoint;
 use crate::geometry::packed::pack_image;

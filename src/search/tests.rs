@@ -1,3 +1,8 @@
+//! The search on random maps: the full search equals brute-force tf-idf
+//! cosine, seeds and block sizes change nothing they should not, early
+//! scores estimate the full ones, deadlines, warm-ups, traces and a stop
+//! inside a tile.
+
 use super::*;
 use crate::index::{ImageWords, MapBuilder, MapIndex};
 use crate::quantize::ExactQuantizer;

@@ -1,3 +1,6 @@
+//! The sequence filter on simulated cameras: noisy vote evidence along a
+//! route, kidnapping, driving past its end, out-of-order frames and gaps.
+
 use super::*;
 use crate::search::prior::posterior;
 use rand::{RngExt, SeedableRng};

@@ -1,3 +1,6 @@
+//! The file format: a round trip, and every wrong magic, version,
+//! truncation and flipped byte refused with its name.
+
 use super::*;
 
 const MAGIC: [u8; 8] = *b"BOWLOCTS";
