@@ -313,6 +313,34 @@ fn cli_reports_bad_input_clearly() {
     let total = json[0]["features"]["total"].as_u64().unwrap();
     assert_eq!(used, total.div_ceil(2));
     assert_eq!(json[0]["seed"], 4);
+
+    // a bad image among good ones: its answer holds the error, the others
+    // are answered, and the command fails at the end
+    let junk = p("junk.jpg");
+    let out = bowloc()
+        .args(["query", "--vocab", &p("v.bowvoc"), "--map", &p("m.bowmap")])
+        .args([&query, &junk, &query])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("1 of 3 images"),
+        "{err}"
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let answers = json.as_array().unwrap();
+    assert_eq!(answers.len(), 3);
+    assert!(
+        answers[1]["error"]
+            .as_str()
+            .unwrap()
+            .contains("not a decodable image")
+    );
+    assert!(answers[1].get("candidates").is_none());
+    for good in [&answers[0], &answers[2]] {
+        assert!(good.get("error").is_none(), "{good}");
+        assert!(!good["candidates"].as_array().unwrap().is_empty(), "{good}");
+    }
 }
 
 /// Every streaming plan finds (almost) the keypoints of the whole image: the

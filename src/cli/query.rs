@@ -19,7 +19,9 @@ pub struct QueryArgs {
     /// Map file, built with that vocabulary (the service's by default).
     #[arg(long, default_value_os_t = FilesConfig::default().map)]
     map: PathBuf,
-    /// Query images.
+    /// Query images. One that cannot be read or decoded gets an answer
+    /// holding its error (and a warning); the others are answered, and the
+    /// command exits with an error at the end.
     #[arg(required = true)]
     images: Vec<PathBuf>,
     #[command(flatten)]
@@ -74,11 +76,22 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     .map_err(anyhow::Error::msg)?;
     let mut filter = Filter::new();
     let mut answers = Vec::with_capacity(a.images.len());
+    let mut failed = 0;
     for path in &a.images {
         let prediction = a.sequence.then(|| filter.predict(&model, &topology, None));
         let mut frame_options = options.clone();
         frame_options.prior = prediction.as_ref().map(|p| Arc::new(p.prior.clone()));
-        let mut answer = localizer.localize_file(path, &frame_options, a.tiles)?;
+        let query = serde_json::Value::String(path.display().to_string());
+        let mut answer = match localizer.localize_file(path, &frame_options, a.tiles) {
+            Ok(answer) => answer,
+            Err(e) => {
+                // one bad file does not cost the others their answers
+                tracing::warn!("not localized: {e:#}");
+                failed += 1;
+                answers.push(serde_json::json!({"query": query, "error": format!("{e:#}")}));
+                continue;
+            }
+        };
         if let (Some(p), Some(post)) = (&prediction, answer.posterior.take()) {
             filter.update(post, p);
             answer.sequence = filter.belief().map(|b| {
@@ -86,9 +99,15 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
             });
         }
         let mut value = serde_json::to_value(&answer)?;
-        value["query"] = serde_json::Value::String(path.display().to_string());
+        value["query"] = query;
         answers.push(value);
     }
     println!("{}", serde_json::to_string_pretty(&answers)?);
+    if failed > 0 {
+        anyhow::bail!(
+            "{failed} of {} images could not be localized (their answers hold the error)",
+            a.images.len()
+        );
+    }
     Ok(())
 }
