@@ -6,8 +6,43 @@ use bowloc::geometry::verify::{Estimator, Model, Order, VerifyParams};
 use bowloc::search::stop::{GENERIC_PARAMETER, RULES, parse_rule};
 use bowloc::search::{RuleSpec, SearchOptions, TileOrder};
 use bowloc::sequence::{Motion, SequenceModel};
+use bowloc::server::config::FilesConfig;
 use clap::Args;
 use clap::builder::{PossibleValue, PossibleValuesParser};
+use std::path::PathBuf;
+
+/// The vocabulary and map a command reads: the service's files (which
+/// `make run` builds) unless named.
+#[derive(Args, Debug, Clone)]
+pub struct MapFiles {
+    /// Vocabulary file (the service's by default, built by `make run`).
+    #[arg(long, default_value_os_t = FilesConfig::default().vocabulary)]
+    pub vocab: PathBuf,
+    /// Map file, built with that vocabulary (the service's by default).
+    #[arg(long, default_value_os_t = FilesConfig::default().map)]
+    pub map: PathBuf,
+}
+
+impl MapFiles {
+    /// An error that says how to get the default files, where one of them
+    /// is taken by default and missing.
+    pub fn check_defaults(&self) -> anyhow::Result<()> {
+        let defaults = FilesConfig::default();
+        for (given, default) in [
+            (&self.vocab, &defaults.vocabulary),
+            (&self.map, &defaults.map),
+        ] {
+            if given == default && !given.exists() {
+                anyhow::bail!(
+                    "{}: no such file; `make run` builds the default vocabulary and map, \
+                     or give --vocab and --map",
+                    given.display()
+                );
+            }
+        }
+        Ok(())
+    }
+}
 
 /// How descriptors are extracted (recorded in the vocabulary).
 #[derive(Args, Debug, Clone)]

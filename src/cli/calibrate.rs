@@ -6,6 +6,7 @@
 //! reason, and the command fails when no rule is; `--out` refuses a choice
 //! that misses its target on the real queries unless `--force`.
 
+use super::args::MapFiles;
 use bowloc::calibrate::{
     Calibrated, Transfer, auto_warmup, calibrate_rule, choose, full_top1, measure, median_features,
     pseudo_queries, server_config,
@@ -23,12 +24,8 @@ use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct CalibrateArgs {
-    /// Vocabulary file.
-    #[arg(long)]
-    vocab: PathBuf,
-    /// Map file.
-    #[arg(long)]
-    map: PathBuf,
+    #[command(flatten)]
+    files: MapFiles,
     /// Largest share of pseudo-queries whose early top-1 may differ from full search.
     #[arg(long, default_value_t = 0.01)]
     max_disagreement: f64,
@@ -65,13 +62,14 @@ pub fn run(a: CalibrateArgs) -> anyhow::Result<()> {
         "--max-disagreement must lie in [0, 1)"
     );
     anyhow::ensure!(a.runs >= 1, "--runs must be at least 1");
-    let vocab = Vocabulary::open(&a.vocab, true)?;
-    let map = MapIndex::open_for(&a.map, &vocab, true)?;
+    a.files.check_defaults()?;
+    let vocab = Vocabulary::open(&a.files.vocab, true)?;
+    let map = MapIndex::open_for(&a.files.map, &vocab, true)?;
     let pseudo = pseudo_queries(&map, 1);
     anyhow::ensure!(
         !pseudo.queries.is_empty() && pseudo.map.images() > 0,
         "{}: a map of {} images is too small to split into a calibration map and pseudo-queries",
-        a.map.display(),
+        a.files.map.display(),
         map.images()
     );
     let counts: Vec<usize> = pseudo.queries.iter().map(|q| q.words.len()).collect();
@@ -187,8 +185,8 @@ pub fn run(a: CalibrateArgs) -> anyhow::Result<()> {
         let absolute = |p: &PathBuf| p.canonicalize().unwrap_or_else(|_| p.clone());
         let config = server_config(
             best,
-            &absolute(&a.vocab),
-            &absolute(&a.map),
+            &absolute(&a.files.vocab),
+            &absolute(&a.files.map),
             a.max_disagreement,
         );
         bowloc::store::write_atomic(out, |w| w.write_all(config.as_bytes()))?;

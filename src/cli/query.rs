@@ -1,24 +1,19 @@
 //! `bowloc query`: localize image files and print the answers as JSON.
 
-use super::args::{SearchArgs, SequenceArgs, VerifyArgs};
+use super::args::{MapFiles, SearchArgs, SequenceArgs, VerifyArgs};
 use bowloc::features::TileGrid;
 use bowloc::index::MapRead;
 use bowloc::pipeline::Localizer;
 use bowloc::report::SequenceAnswer;
 use bowloc::sequence::{Filter, Topology, TopologyKind};
-use bowloc::server::config::FilesConfig;
 use clap::Args;
 use std::path::PathBuf;
 use std::sync::Arc;
 
 #[derive(Args)]
 pub struct QueryArgs {
-    /// Vocabulary file (the service's by default, built by `make run`).
-    #[arg(long, default_value_os_t = FilesConfig::default().vocabulary)]
-    vocab: PathBuf,
-    /// Map file, built with that vocabulary (the service's by default).
-    #[arg(long, default_value_os_t = FilesConfig::default().map)]
-    map: PathBuf,
+    #[command(flatten)]
+    files: MapFiles,
     /// Query images. One that cannot be read or decoded gets an answer
     /// holding its error (and a warning); the others are answered, and the
     /// command exits with an error at the end.
@@ -44,17 +39,8 @@ pub struct QueryArgs {
 }
 
 pub fn run(a: QueryArgs) -> anyhow::Result<()> {
-    let defaults = FilesConfig::default();
-    for (given, default) in [(&a.vocab, &defaults.vocabulary), (&a.map, &defaults.map)] {
-        if given == default && !given.exists() {
-            anyhow::bail!(
-                "{}: no such file; `make run` builds the default vocabulary and map, \
-                 or give --vocab and --map",
-                given.display()
-            );
-        }
-    }
-    let mut localizer = Localizer::open(&a.vocab, &a.map, true)?;
+    a.files.check_defaults()?;
+    let mut localizer = Localizer::open(&a.files.vocab, &a.files.map, true)?;
     localizer.tiles = TileGrid::DEFAULT;
     localizer.set_verify(a.verify.params()?);
     let model = a.model.model()?;
