@@ -319,6 +319,34 @@ fn add_once<'a>(
     }
 }
 
+/// The full search a setting is compared with: verified if it is.
+fn full_search_like<'a>(report: &'a Report, s: &SettingSummary) -> Option<&'a SettingSummary> {
+    report
+        .settings
+        .iter()
+        .find(|f| f.setting.rule.name == BASELINE && f.setting.verify == s.setting.verify)
+}
+
+/// Points of `full`'s recall that `s` loses on each vocabulary seed
+/// (negative where it gains), "–" where either has none.
+fn points_lost(full: &Stat, s: &Stat) -> String {
+    let lost: Vec<String> = full
+        .per_seed
+        .iter()
+        .zip(&s.per_seed)
+        .map(|(f, v)| {
+            let d = (1000.0 * (f - v)).round() / 10.0;
+            if d.is_nan() {
+                "–".into()
+            } else {
+                // no "-0.0" for a tie
+                format!("{:.1}", d + 0.0)
+            }
+        })
+        .collect();
+    lost.join(" / ")
+}
+
 fn explicit_section(report: &Report, base: &SettingSummary) -> String {
     if report.explicit.is_empty() {
         return String::new();
@@ -329,6 +357,28 @@ fn explicit_section(report: &Report, base: &SettingSummary) -> String {
         .chain(columns.iter().map(|c| marked(c, c.label.clone())))
         .collect();
     let mut rows = paper_rows(&columns, "parameter");
+    // how far each setting falls under its full search, which the targets
+    // are read against: per seed, in points
+    let after = rows
+        .iter()
+        .position(|r| r[0] == "recall@5, per seed")
+        .map_or(rows.len(), |i| i + 1);
+    let recall_at_1: fn(&SettingSummary) -> &Stat = |s| &s.recall_at_1;
+    let recall_at_5: fn(&SettingSummary) -> &Stat = |s| &s.recall_at_5;
+    for (k, (what, stat)) in [("recall@1", recall_at_1), ("recall@5", recall_at_5)]
+        .into_iter()
+        .enumerate()
+    {
+        rows.insert(
+            after + k,
+            std::iter::once(format!("{what} lost to the full search, per seed"))
+                .chain(columns.iter().map(|c| {
+                    full_search_like(report, c)
+                        .map_or("–".into(), |full| points_lost(stat(full), stat(c)))
+                }))
+                .collect(),
+        );
+    }
     rows.insert(
         rows.len() - 2,
         std::iter::once("warm-up".to_owned())
@@ -747,5 +797,16 @@ mod tests {
             "| `hoeffding` | 0 | 1 | 100.0 | hoeffding 0.5 | 100.0 | hoeffding 0.5 |"
         );
         assert!(md.contains("full search's (means 91.5 and 66.0)"), "{md}");
+    }
+
+    #[test]
+    fn points_lost_are_per_seed_signed_and_never_minus_zero() {
+        let stat = |per_seed: Vec<f64>| Stat {
+            per_seed,
+            ..Stat::default()
+        };
+        let full = stat(vec![0.830, 0.835, 0.850, 0.9]);
+        let s = stat(vec![0.820, 0.845, 0.8500004, f64::NAN]);
+        assert_eq!(points_lost(&full, &s), "1.0 / -1.0 / 0.0 / –");
     }
 }
