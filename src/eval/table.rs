@@ -334,14 +334,11 @@ fn points_lost(full: &Stat, s: &Stat) -> String {
         .per_seed
         .iter()
         .zip(&s.per_seed)
-        .map(|(f, v)| {
-            let d = (1000.0 * (f - v)).round() / 10.0;
-            if d.is_nan() {
-                "–".into()
-            } else {
-                // no "-0.0" for a tie
-                format!("{:.1}", d + 0.0)
-            }
+        .map(|(f, v)| match f - v {
+            d if d.is_nan() => "–".into(),
+            // a tie to the shown digit reads 0.0, not -0.0
+            d if d.abs() < 0.0005 => pct(0.0),
+            d => pct(d),
         })
         .collect();
     lost.join(" / ")
