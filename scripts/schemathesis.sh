@@ -49,10 +49,10 @@ tmp=$(mktemp -d)
 trap 'stop_server; rm -rf "$tmp"' EXIT
 cp data/load/vocab.bowvoc data/load/map.bowmap "$tmp/"
 token=schemathesis-write-token-0123456789
-server_config 2 32 "$tmp" "$(printf '[auth]\nwrite_token = "%s"' "$token")" >"$tmp/config.toml"
 # the copy is the load map, so its images serve the thumbnails: links from
 # /localize's candidates reach GET /images/{id}/thumbnail's 200 answers
-BOWLOC_FILES__IMAGES="$DATASET" start_server "$tmp/config.toml" "$tmp/server.log"
+server_config 2 32 "$tmp" "$(printf '[auth]\nwrite_token = "%s"' "$token")" "$DATASET" >"$tmp/config.toml"
+start_server "$tmp/config.toml" "$tmp/server.log"
 run() {
   local status=0
   "$venv/bin/schemathesis" run "http://$SERVER_ADDR/openapi.json" \

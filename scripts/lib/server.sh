@@ -16,9 +16,11 @@
 #                            1) or data/gardens-K-sSEED/, built on first use
 #   map_dir BASE SEED        where those maps are: BASE for seed 1, else
 #                            BASE-sSEED
-#   server_config WORKERS QUEUE [DIR] [EXTRA-TOML]
+#   server_config WORKERS QUEUE [DIR] [EXTRA-TOML] [IMAGES]
 #                            a loopback configuration for the map in DIR
-#                            (default data/load), printed
+#                            (default data/load), printed; thumbnails from
+#                            IMAGES (default: the load map's dataset when
+#                            DIR is not given, else none)
 #   wrk_post_script FILE IMAGE   a wrk Lua script that posts IMAGE (JPEG)
 #   load_prepare             for the wrk scripts: wrk present, the load map
 #                            built, a temporary folder in TMP (removed, with
@@ -96,8 +98,8 @@ workers = $1
 [files]
 vocabulary = "${3:-data/load}/vocab.bowvoc"
 map = "${3:-data/load}/map.bowmap"
-# the load map's images (thumbnails); another map's are not served
-images = "$([ -z "${3:-}" ] && echo "$DATASET")"
+# the map's images (thumbnails): the load map's, unless told otherwise
+images = "${5-$([ -z "${3:-}" ] && echo "$DATASET")}"
 [limits]
 queue = $2
 ${4:-}
