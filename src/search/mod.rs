@@ -31,7 +31,7 @@ pub mod vote;
 pub use permute::TileOrder;
 pub use prior::{Posterior, Prior};
 pub use rank::Ranked;
-pub use stop::{LeaderCheck, RuleSpec, StopRule};
+pub use stop::{LeaderCheck, Progress, RuleSpec, StopRule};
 pub use trace::{Trace, TracePoint};
 pub use vote::{Needs, Tally, VoteStats, Voter};
 
@@ -262,7 +262,7 @@ pub struct Search<'m> {
     /// finishes it ([`SearchOptions::finish_tile`]).
     streamed: bool,
     /// Whether the batch being voted is a coarse pass, where only a
-    /// geometric check may stop ([`StopRule::check_on_coarse`]).
+    /// geometric check may stop ([`Progress::coarse`]).
     coarse_batch: bool,
     batches: u64,
     fed: usize,
@@ -401,13 +401,11 @@ impl<'m> Search<'m> {
                         .filter(|_| block_end)
                         .map(|c| &mut **c as &mut dyn LeaderCheck);
                     let started = block_end.then(Instant::now);
-                    let why = if self.coarse_batch {
-                        self.rule
-                            .check_on_coarse(&self.voter, &self.voted, check, at_end)
-                    } else {
-                        self.rule
-                            .check_with(&self.voter, &self.voted, check, at_end)
+                    let progress = Progress {
+                        coarse: self.coarse_batch,
+                        ..Progress::new(&self.voted, check, at_end)
                     };
+                    let why = self.rule.check_with(&self.voter, progress);
                     if let Some(started) = started {
                         checking += started.elapsed();
                     }
@@ -448,7 +446,7 @@ impl<'m> Search<'m> {
     /// inside a tile of an image that comes in several, the tile's other
     /// features are voted before it ends. On a coarse pass
     /// (`step.coarse`) only the rule's geometric check may stop the search
-    /// ([`StopRule::check_on_coarse`]).
+    /// ([`Progress::coarse`]).
     /// Returns whether the search has stopped.
     pub fn feed_tile(
         &mut self,

@@ -42,35 +42,50 @@ pub trait StopRule: Send {
     }
 
     /// [`check`](Self::check) with what a geometric rule needs besides the
-    /// votes: the features voted so far and a way to check a
-    /// candidate against them, offered at the end of each block of features
-    /// (`batch_end`: the last block of a batch, after which the next tile
-    /// must be extracted). Vote rules ignore them.
-    fn check_with(
-        &mut self,
-        voter: &dyn VoteStats,
-        voted: &[Voted],
-        leader_check: Option<&mut dyn LeaderCheck>,
-        batch_end: bool,
-    ) -> Option<String> {
-        let _ = (voted, leader_check, batch_end);
-        self.check(voter)
+    /// votes: where the search stands ([`Progress`]). A vote rule reads the
+    /// votes alone, and does not stop a search on a coarse pass.
+    fn check_with(&mut self, voter: &dyn VoteStats, progress: Progress<'_>) -> Option<String> {
+        if progress.coarse {
+            None
+        } else {
+            self.check(voter)
+        }
     }
+}
 
-    /// [`check_with`](Self::check_with) on the coarse pass of a streamed
-    /// query (the whole frame at half size, extracted first). Its features
-    /// are the image's coarser scales, not a random sample of the image, so
-    /// a vote statistic on them claims more than it knows: a vote rule does
-    /// not stop there (the default), only a geometric check may.
-    fn check_on_coarse(
-        &mut self,
-        voter: &dyn VoteStats,
-        voted: &[Voted],
-        leader_check: Option<&mut dyn LeaderCheck>,
+/// Where a search stands when it asks its rule, besides the votes.
+pub struct Progress<'a> {
+    /// Every feature voted so far, in voting order.
+    pub voted: &'a [Voted],
+    /// A way to check candidates against them geometrically, offered only
+    /// at the end of a block of features (a check costs far more than a
+    /// vote).
+    pub leader_check: Option<&'a mut dyn LeaderCheck>,
+    /// Whether this vote ends a batch: the last of a tile, after which the
+    /// next tile must be extracted.
+    pub batch_end: bool,
+    /// Whether the batch is the coarse pass of a streamed query (the whole
+    /// frame at half size, extracted first). Its features are the image's
+    /// coarser scales, not a random sample of the image, so a vote
+    /// statistic on them claims more than it knows: only a geometric check
+    /// may stop there.
+    pub coarse: bool,
+}
+
+impl<'a> Progress<'a> {
+    /// Outside a coarse pass: the features `voted`, the check offered (at
+    /// a block's end) and whether the batch ends.
+    pub fn new(
+        voted: &'a [Voted],
+        leader_check: Option<&'a mut dyn LeaderCheck>,
         batch_end: bool,
-    ) -> Option<String> {
-        let _ = (voter, voted, leader_check, batch_end);
-        None
+    ) -> Self {
+        Self {
+            voted,
+            leader_check,
+            batch_end,
+            coarse: false,
+        }
     }
 }
 
@@ -142,25 +157,25 @@ struct GeometricCheck {
 }
 
 /// The geometric stop both `verified` and a vote rule's `or_verified` make:
-/// the voter's top `candidates` handed to `checker`, which verifies and
-/// re-ranks them as the final answer is. `None` without candidates; else
-/// the answer's inliers, those it needed (at least `min_inliers`, and more
-/// than [`LeaderCheck::fit_needs`]) and, when it has them at the query's
-/// scale, why the search stops.
+/// the voter's top `candidates` handed to the check the search offers,
+/// which verifies and re-ranks them as the final answer is. `None` without
+/// a check or candidates; else the answer's inliers, those it needed (at
+/// least `min_inliers`, and more than [`LeaderCheck::fit_needs`]) and, when
+/// it has them at the query's scale, why the search stops.
 fn check_answer(
     voter: &dyn VoteStats,
-    voted: &[Voted],
-    checker: &mut dyn LeaderCheck,
+    progress: Progress<'_>,
     candidates: usize,
     min_inliers: usize,
 ) -> Option<GeometricCheck> {
+    let checker = progress.leader_check?;
     let top: Vec<(u32, f32)> = voter
         .top()
         .iter()
         .take(candidates)
         .map(|&(h, id)| (id, h))
         .collect();
-    let answer = checker.answer(&top, voted)?;
+    let answer = checker.answer(&top, progress.voted)?;
     let needed = min_inliers.max(checker.fit_needs() + 1);
     let why = answer
         .verified_at_scale(needed, checker.max_log_scale())

@@ -19,8 +19,7 @@
 //! its `verify.top_k` model fits, about half a millisecond each); a search
 //! with no tile left, or extracted whole, has the vote rule alone.
 
-use super::{LeaderCheck, Needs, StopRule, VoteStats, check_answer};
-use crate::search::Voted;
+use super::{Needs, Progress, StopRule, VoteStats, check_answer};
 
 pub struct OrVerified {
     pub votes: Box<dyn StopRule>,
@@ -48,33 +47,17 @@ impl StopRule for OrVerified {
         self.votes.statistic(voter)
     }
 
-    fn check_with(
-        &mut self,
-        voter: &dyn VoteStats,
-        voted: &[Voted],
-        leader_check: Option<&mut dyn LeaderCheck>,
-        batch_end: bool,
-    ) -> Option<String> {
-        if let Some(why) = self.votes.check(voter) {
+    /// The vote rule's check, unless on a coarse pass; then, at the end of
+    /// a tile with tiles left (N not known yet), the geometric check.
+    fn check_with(&mut self, voter: &dyn VoteStats, progress: Progress<'_>) -> Option<String> {
+        if !progress.coarse
+            && let Some(why) = self.votes.check(voter)
+        {
             return Some(why);
         }
-        self.check_on_coarse(voter, voted, leader_check, batch_end)
-    }
-
-    /// The geometric check alone: the vote rule does not stop a search on
-    /// a coarse pass.
-    fn check_on_coarse(
-        &mut self,
-        voter: &dyn VoteStats,
-        voted: &[Voted],
-        leader_check: Option<&mut dyn LeaderCheck>,
-        batch_end: bool,
-    ) -> Option<String> {
-        // a tile's end with tiles left: N is not known yet
-        if !batch_end || voter.tally().total.is_some() {
+        if !progress.batch_end || voter.tally().total.is_some() {
             return None;
         }
-        let checker = leader_check?;
-        check_answer(voter, voted, checker, self.candidates, self.min_inliers)?.why
+        check_answer(voter, progress, self.candidates, self.min_inliers)?.why
     }
 }

@@ -400,7 +400,7 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     voter.vote(0, 0);
     for _ in 0..3 {
         assert!(
-            rule.check_with(&voter, &[VOTED_0], Some(&mut c), true)
+            rule.check_with(&voter, Progress::new(&[VOTED_0], Some(&mut c), true))
                 .is_none()
         );
     }
@@ -412,7 +412,10 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
     let mut rule = spec("verified", 8.0).build(&RuleContext::default());
     for _ in 0..100 {
         voter.vote(0, 0);
-        assert!(rule.check_with(&voter, &[VOTED_0], None, true).is_none());
+        assert!(
+            rule.check_with(&voter, Progress::new(&[VOTED_0], None, true))
+                .is_none()
+        );
     }
     // inside a batch, checks follow a geometric schedule: at 1, 2, 3, 5, 8,
     // 12, … features (each at least 1.5 times the last)
@@ -436,7 +439,7 @@ fn verified_checks_the_leader_whenever_offered_and_stops_at_m_inliers() {
         });
         let before = c.calls;
         assert!(
-            rule.check_with(&voter, &voted, Some(&mut c), false)
+            rule.check_with(&voter, Progress::new(&voted, Some(&mut c), false))
                 .is_none()
         );
         if c.calls > before {
@@ -569,7 +572,7 @@ fn a_geometric_stop_never_counts_the_pairs_a_fit_takes_as_evidence() {
     voter.vote(0, 0);
     let mut c = check(4);
     assert!(
-        rule.check_with(&voter, &[VOTED_0], Some(&mut c), true)
+        rule.check_with(&voter, Progress::new(&[VOTED_0], Some(&mut c), true))
             .is_none()
     );
     assert_eq!(rule.statistic(&voter), Some((4.0, 5.0)));
@@ -603,7 +606,10 @@ fn stops_with_check_in(
             signature: 0,
         });
         let offered = check.as_mut().map(|c| &mut **c as &mut dyn LeaderCheck);
-        if rule_now.check_with(&voter, &voted, offered, true).is_some() {
+        if rule_now
+            .check_with(&voter, Progress::new(&voted, offered, true))
+            .is_some()
+        {
             return Some(voter.tally().features);
         }
     }
@@ -816,7 +822,7 @@ fn or_verified_checks_only_at_a_tiles_end_with_tiles_left() {
     // inside a tile: no check
     assert!(
         rule_now
-            .check_with(&voter, &voted, Some(&mut c), false)
+            .check_with(&voter, Progress::new(&voted, Some(&mut c), false))
             .is_none()
     );
     assert_eq!(c.calls, 0);
@@ -824,7 +830,7 @@ fn or_verified_checks_only_at_a_tiles_end_with_tiles_left() {
     voter.set_total(1);
     assert!(
         rule_now
-            .check_with(&voter, &voted, Some(&mut c), true)
+            .check_with(&voter, Progress::new(&voted, Some(&mut c), true))
             .is_none()
     );
     assert_eq!(c.calls, 0);
@@ -833,9 +839,61 @@ fn or_verified_checks_only_at_a_tiles_end_with_tiles_left() {
     let mut voter = Voter::with_needs(&view, rule_now.needs());
     voter.vote(0, 0);
     voter.set_expected_total(4.0);
-    let why = rule_now.check_with(&voter, &voted, Some(&mut c), true);
+    let why = rule_now.check_with(&voter, Progress::new(&voted, Some(&mut c), true));
     assert_eq!(c.calls, 1);
     assert!(why.is_some_and(|w| w.contains("answer 0 verified at the query's scale")));
+}
+
+#[test]
+fn on_a_coarse_pass_only_the_geometric_check_stops() {
+    fn coarse<'a>(
+        voted: &'a [Voted],
+        check: Option<&'a mut dyn LeaderCheck>,
+        batch_end: bool,
+    ) -> Progress<'a> {
+        Progress {
+            coarse: true,
+            ..Progress::new(voted, check, batch_end)
+        }
+    }
+    let map = one_word_per_image();
+    let view = map.view();
+    // a vote rule that stops after one feature does not stop on it
+    let mut votes_only = spec("fixed", 0.01).build(&RuleContext::default());
+    let mut voter = Voter::with_needs(&view, votes_only.needs());
+    voter.vote(0, 0);
+    voter.set_expected_total(4.0);
+    assert!(votes_only.check(&voter).is_some());
+    assert!(
+        votes_only
+            .check_with(&voter, coarse(&[VOTED_0], None, true))
+            .is_none()
+    );
+    // beside a verified stop, the vote rule still does not; the check does
+    let rule = spec("fixed", 0.01).or_verified(Some(12.0)).unwrap();
+    for (inliers, stops) in [(4, false), (40, true)] {
+        let mut rule_now = rule.build(&RuleContext::default());
+        let mut c = FakeCheck {
+            inliers,
+            calls: 0,
+            scale: 1.0,
+        };
+        let why = rule_now.check_with(&voter, coarse(&[VOTED_0], Some(&mut c), true));
+        assert_eq!(c.calls, 1);
+        assert_eq!(why.is_some(), stops, "{inliers} inliers: {why:?}");
+    }
+    // `verified` checks a coarse pass as any tile
+    let mut verified = spec("verified", 12.0).build(&RuleContext::default());
+    let mut c = FakeCheck {
+        inliers: 40,
+        calls: 0,
+        scale: 1.0,
+    };
+    assert!(
+        verified
+            .check_with(&voter, coarse(&[VOTED_0], Some(&mut c), true))
+            .is_some()
+    );
 }
 
 /// A check that records how many candidates it was handed.
@@ -870,7 +928,7 @@ fn or_verified_hands_the_check_the_searchs_top_n() {
         let mut c = CountingCheck(Vec::new());
         assert!(
             rule_now
-                .check_with(&voter, &[VOTED_0], Some(&mut c), true)
+                .check_with(&voter, Progress::new(&[VOTED_0], Some(&mut c), true))
                 .is_none()
         );
         assert_eq!(c.0, [expected], "top_n {top_n}");

@@ -23,10 +23,7 @@
 //! have grown by [`GROWTH`] since the last check, so a query is checked
 //! O(log N) times. The same votes are not checked twice.
 
-use super::{
-    Grid, LeaderCheck, Needs, Parameter, Range, RuleInfo, StopRule, VoteStats, check_answer,
-};
-use crate::search::Voted;
+use super::{Grid, Needs, Parameter, Progress, Range, RuleInfo, StopRule, VoteStats, check_answer};
 
 pub const INFO: RuleInfo = RuleInfo {
     name: "verified",
@@ -76,35 +73,18 @@ impl StopRule for Verified {
         None
     }
 
-    fn check_with(
-        &mut self,
-        voter: &dyn VoteStats,
-        voted: &[Voted],
-        leader_check: Option<&mut dyn LeaderCheck>,
-        batch_end: bool,
-    ) -> Option<String> {
+    /// The coarse pass is checked as any tile.
+    fn check_with(&mut self, voter: &dyn VoteStats, progress: Progress<'_>) -> Option<String> {
         let features = voter.tally().features;
-        let checker = leader_check?;
         if let Some(at) = self.checked_at
-            && (features == at || !batch_end && (features as f64) < at as f64 * GROWTH)
+            && (features == at || !progress.batch_end && (features as f64) < at as f64 * GROWTH)
         {
             return None;
         }
-        let check = check_answer(voter, voted, checker, self.candidates, self.min_inliers)?;
+        let check = check_answer(voter, progress, self.candidates, self.min_inliers)?;
         self.checked_at = Some(features);
         self.last = Some((check.inliers, check.needed));
         check.why
-    }
-
-    /// A geometric rule: the coarse pass is checked as any tile.
-    fn check_on_coarse(
-        &mut self,
-        voter: &dyn VoteStats,
-        voted: &[Voted],
-        leader_check: Option<&mut dyn LeaderCheck>,
-        batch_end: bool,
-    ) -> Option<String> {
-        self.check_with(voter, voted, leader_check, batch_end)
     }
 
     /// The inliers of the last check, against those it needed (m, or more
