@@ -19,7 +19,8 @@
 # "1 1.25 1.5 1.75 2 2.25 2.5 3"), CHOOSE and ASIDE (NAME:WORDS; default
 # gardens-point:5000 and rtabmap-loop:1000), VERIFIED (the verified stop's
 # inliers, default 12; 0: the vote rule alone, without verification) and
-# MODEL (the verification model, default the configuration's).
+# MODEL (the verification model, default the configuration's); EVAL_ARGS,
+# more `bowloc eval` options for both datasets (e.g. "--min-inliers 6").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-data/eval/choose}
@@ -41,7 +42,7 @@ fi
 for dataset in "$choose" "$aside"; do
   name=${dataset%%:*}
   ./target/release/bowloc --log warn eval --dataset "../shared/datasets/$name" --words "${dataset##*:}" \
-    --runs 3 --vocab-seeds 3 --rules none "${verify[@]}" "${sets[@]}" --no-plots --out "$out/$name" >/dev/null
+    --runs 3 --vocab-seeds 3 --rules none "${verify[@]}" "${sets[@]}" ${EVAL_ARGS:-} --no-plots --out "$out/$name" >/dev/null
 done
 # the full search compared with: verified if the rule is
 full_label=none

@@ -122,7 +122,10 @@ fn verification_raises_recall_at_1_of_an_early_stopped_search() {
     let answer = localizer.localize_file(&q.path, &options, None).unwrap();
     assert_eq!(answer.candidates.len(), 3);
     let top = &answer.candidates[0];
-    assert!(top.inliers.unwrap() >= params.min_inliers as u32, "{top:?}");
+    assert!(
+        top.inliers.unwrap() >= params.min_inliers() as u32,
+        "{top:?}"
+    );
     assert_eq!(top.verified, Some(true));
     // the default order scores the inliers of the candidate's place: its
     // own and its checked neighbours'

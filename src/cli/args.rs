@@ -374,9 +374,10 @@ pub struct VerifyArgs {
     /// Vote candidates verified.
     #[arg(long, default_value_t = VerifyParams::default().top_k)]
     pub verify_top_k: usize,
-    /// Inliers for a candidate to count as verified.
-    #[arg(long, default_value_t = VerifyParams::default().min_inliers)]
-    pub min_inliers: usize,
+    /// Inliers for a candidate to count as verified (and matches for it to
+    /// be fitted at all) [default: 6 for a similarity, 12 for the other models]
+    #[arg(long)]
+    pub min_inliers: Option<usize>,
     /// Skip words giving more (query, map) pairs than this between two images.
     #[arg(long, default_value_t = VerifyParams::default().max_word_pairs)]
     pub max_word_pairs: usize,

@@ -135,7 +135,7 @@ pub fn markdown(report: &VerificationReport) -> String {
         p.threshold_px,
         p.max_word_pairs,
         p.order,
-        p.min_inliers
+        p.min_inliers()
     );
     for r in &report.rows {
         for (name, x) in [("no", &r.without), ("yes", &r.with)] {

@@ -140,6 +140,18 @@ impl Model {
             Self::Affine => 3,
         }
     }
+
+    /// The inliers that verify a candidate unless `verify.min_inliers`
+    /// says otherwise: 6 for a similarity, chosen on gardens-point and
+    /// checked on rtabmap-loop (docs/results.md, "The verification
+    /// floor"); 12, the value before, for the models that floor was not
+    /// measured with.
+    pub fn default_min_inliers(self) -> usize {
+        match self {
+            Self::Similarity => 6,
+            Self::Homography | Self::Fundamental | Self::Affine => 12,
+        }
+    }
 }
 
 impl Estimator {
@@ -212,8 +224,12 @@ pub struct VerifyParams {
     pub enabled: bool,
     /// Vote candidates verified (the rest keep their vote order below them).
     pub top_k: usize,
-    /// Inliers for a candidate to count as verified.
-    pub min_inliers: usize,
+    /// Inliers for a candidate to count as verified, and matches for it to
+    /// be fitted at all; `None`: the model's default
+    /// ([`Model::default_min_inliers`], read through
+    /// [`VerifyParams::min_inliers`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_inliers: Option<usize>,
     /// A word giving more pairs than this between the two images is skipped.
     pub max_word_pairs: usize,
     /// Features whose Hamming signatures differ in more bits than this do
@@ -246,7 +262,7 @@ impl Default for VerifyParams {
         Self {
             enabled: true,
             top_k: 10,
-            min_inliers: 12,
+            min_inliers: None,
             max_word_pairs: 4,
             max_hamming: 16,
             order: Order::PlaceScale,
@@ -272,16 +288,23 @@ impl VerifyParams {
         }
     }
 
+    /// Inliers for a candidate to count as verified: the configured value,
+    /// else the model's default.
+    pub fn min_inliers(&self) -> usize {
+        self.min_inliers
+            .unwrap_or_else(|| self.model.default_min_inliers())
+    }
+
     pub fn validate(&self) -> Result<(), String> {
         if self.top_k == 0 {
             return Err("top_k must be at least 1".into());
         }
         let needs = self.model.min_matches();
-        if self.min_inliers <= needs {
+        if self.min_inliers() <= needs {
             return Err(format!(
                 "min_inliers must be more than the {needs} pairs a {} fit takes (any {needs} agree with the model fitted to them), got {}",
                 self.model.name(),
-                self.min_inliers
+                self.min_inliers()
             ));
         }
         if self.max_word_pairs == 0 {
@@ -430,7 +453,7 @@ pub fn verify_features(
         params.max_word_pairs,
         params.max_hamming,
     );
-    fit_inliers(&c, fit, params.min_inliers)
+    fit_inliers(&c, fit, params.min_inliers())
 }
 
 /// Verify the current leader against the features seen so far: what a
@@ -849,7 +872,7 @@ mod tests {
         // of image 2 (1.5)
         let with_min = |min_inliers: usize| -> Vec<u32> {
             let params = VerifyParams {
-                min_inliers,
+                min_inliers: Some(min_inliers),
                 ..in_order(Order::PlaceScale)
             };
             let out = all_inliers(&map, &votes, &query, params, 2);
@@ -864,6 +887,20 @@ mod tests {
     #[test]
     fn settings_are_checked() {
         assert!(VerifyParams::default().validate().is_ok());
+        // every model's default floor is more than its fit takes
+        for model in Model::ALL {
+            let p = VerifyParams {
+                model,
+                ..Default::default()
+            };
+            assert!(p.validate().is_ok(), "{model:?}");
+            assert_eq!(p.min_inliers(), model.default_min_inliers());
+        }
+        let set = VerifyParams {
+            min_inliers: Some(9),
+            ..Default::default()
+        };
+        assert_eq!(set.min_inliers(), 9);
         for bad in [
             VerifyParams {
                 top_k: 0,
@@ -880,12 +917,12 @@ mod tests {
             // a homography fits any 4 pairs, a fundamental matrix any 8
             VerifyParams {
                 model: Model::Homography,
-                min_inliers: 4,
+                min_inliers: Some(4),
                 ..Default::default()
             },
             VerifyParams {
                 model: Model::Fundamental,
-                min_inliers: 8,
+                min_inliers: Some(8),
                 ..Default::default()
             },
         ] {
