@@ -252,9 +252,10 @@ impl<C: search::LeaderCheck> search::LeaderCheck for CpuTimed<C> {
         &mut self,
         candidates: &[(u32, f32)],
         voted: &[search::Voted],
+        min_inliers: usize,
     ) -> Option<search::stop::CheckedAnswer> {
         let started = ThreadTime::now();
-        let answer = self.inner.answer(candidates, voted);
+        let answer = self.inner.answer(candidates, voted, min_inliers);
         self.spent += started.elapsed();
         answer
     }

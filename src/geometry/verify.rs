@@ -493,14 +493,25 @@ impl LeaderCheck for LeaderVerifier<'_> {
         verify_leader(self.map, image, &query, self.fit, self.params).inliers
     }
 
-    fn answer(&mut self, candidates: &[(u32, f32)], voted: &[Voted]) -> Option<CheckedAnswer> {
+    fn answer(
+        &mut self,
+        candidates: &[(u32, f32)],
+        voted: &[Voted],
+        min_inliers: usize,
+    ) -> Option<CheckedAnswer> {
         let query = with_keypoints(voted, self.keypoints);
+        // a floor under the stop's m would let `place-scale` answer with a
+        // candidate too weak to stop on, and hide a stronger one of its place
+        let params = VerifyParams {
+            min_inliers: Some(self.params.min_inliers().max(min_inliers)),
+            ..self.params.clone()
+        };
         let reranked = rerank(
             self.map,
             candidates,
             &query,
             self.fit,
-            self.params,
+            &params,
             self.place_window,
         );
         reranked.first().map(|r| CheckedAnswer {

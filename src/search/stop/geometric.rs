@@ -15,9 +15,17 @@ pub trait LeaderCheck {
     fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize;
 
     /// The answer verification would give now: `candidates` (id, votes;
-    /// best first) verified and re-ranked as the final answer is, and its
-    /// first. `None` without candidates.
-    fn answer(&mut self, candidates: &[(u32, f32)], voted: &[Voted]) -> Option<CheckedAnswer>;
+    /// best first) verified and re-ranked as the final answer is, with
+    /// `min_inliers` (the stop's m) as the floor of a verified candidate if
+    /// it is above the verification's own, so that the answer checked is
+    /// one that can stop the search; and its first. `None` without
+    /// candidates.
+    fn answer(
+        &mut self,
+        candidates: &[(u32, f32)],
+        voted: &[Voted],
+        min_inliers: usize,
+    ) -> Option<CheckedAnswer>;
 
     /// Largest |ln scale| of an answer at the query's scale
     /// ([`CheckedAnswer::verified_at_scale`]): the verification's settings
@@ -93,8 +101,8 @@ pub(super) fn check_answer(
         .take(candidates)
         .map(|&(h, id)| (id, h))
         .collect();
-    let answer = checker.answer(&top, progress.voted)?;
     let needed = min_inliers.max(checker.fit_needs() + 1);
+    let answer = checker.answer(&top, progress.voted, needed)?;
     let why = answer
         .verified_at_scale(needed, checker.max_log_scale())
         .then(|| {

@@ -342,7 +342,12 @@ impl LeaderCheck for FakeCheck {
     }
 
     /// Image 0 first when it is a candidate, else the first candidate.
-    fn answer(&mut self, candidates: &[(u32, f32)], voted: &[Voted]) -> Option<CheckedAnswer> {
+    fn answer(
+        &mut self,
+        candidates: &[(u32, f32)],
+        voted: &[Voted],
+        _min_inliers: usize,
+    ) -> Option<CheckedAnswer> {
         let first = candidates
             .iter()
             .find(|c| c.0 == 0)
@@ -503,8 +508,13 @@ impl LeaderCheck for Bounds {
         self.check.inliers(image, voted)
     }
 
-    fn answer(&mut self, candidates: &[(u32, f32)], voted: &[Voted]) -> Option<CheckedAnswer> {
-        self.check.answer(candidates, voted)
+    fn answer(
+        &mut self,
+        candidates: &[(u32, f32)],
+        voted: &[Voted],
+        min_inliers: usize,
+    ) -> Option<CheckedAnswer> {
+        self.check.answer(candidates, voted, min_inliers)
     }
 
     fn max_log_scale(&self) -> f32 {
@@ -896,6 +906,62 @@ fn on_a_coarse_pass_only_the_geometric_check_stops() {
     );
 }
 
+/// A check that records the floor each answer was asked for.
+struct FloorCheck(Vec<usize>);
+
+impl LeaderCheck for FloorCheck {
+    fn inliers(&mut self, _image: u32, _voted: &[Voted]) -> usize {
+        0
+    }
+
+    fn answer(
+        &mut self,
+        candidates: &[(u32, f32)],
+        _voted: &[Voted],
+        min_inliers: usize,
+    ) -> Option<CheckedAnswer> {
+        self.0.push(min_inliers);
+        candidates.first().map(|c| CheckedAnswer {
+            id: c.0,
+            inliers: 0,
+            scale: None,
+        })
+    }
+
+    fn fit_needs(&self) -> usize {
+        4
+    }
+}
+
+#[test]
+fn a_geometric_stop_asks_for_an_answer_verified_with_its_own_m() {
+    // the answer it checks is verified with at least the inliers it needs
+    // to stop (m, or more than the fit takes), whatever the verification's
+    // own floor
+    let map = one_word_per_image();
+    let view = map.view();
+    for (rule, expected) in [
+        (spec("verified", 13.0), 13),
+        (spec("verified", 4.0), 5),
+        (
+            spec("stable-peak", 1000.0).or_verified(Some(12.0)).unwrap(),
+            12,
+        ),
+    ] {
+        let mut rule_now = rule.build(&RuleContext::default());
+        let mut voter = Voter::with_needs(&view, rule_now.needs());
+        voter.vote(0, 0);
+        voter.set_expected_total(4.0);
+        let mut c = FloorCheck(Vec::new());
+        assert!(
+            rule_now
+                .check_with(&voter, Progress::new(&[VOTED_0], Some(&mut c), true))
+                .is_none()
+        );
+        assert_eq!(c.0, [expected], "{rule}");
+    }
+}
+
 /// A check that records how many candidates it was handed.
 struct CountingCheck(Vec<usize>);
 
@@ -904,7 +970,12 @@ impl LeaderCheck for CountingCheck {
         0
     }
 
-    fn answer(&mut self, candidates: &[(u32, f32)], _voted: &[Voted]) -> Option<CheckedAnswer> {
+    fn answer(
+        &mut self,
+        candidates: &[(u32, f32)],
+        _voted: &[Voted],
+        _min_inliers: usize,
+    ) -> Option<CheckedAnswer> {
         self.0.push(candidates.len());
         None
     }
