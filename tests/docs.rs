@@ -1,5 +1,6 @@
-//! The docs show the rule table the registry generates (`bowloc rules`) and
-//! the image formats the decoder accepts, not copies that can drift.
+//! The docs show the rule table the registry generates (`bowloc rules`),
+//! the image formats the decoder accepts and the verification floor of each
+//! model, not copies that can drift.
 
 use bowloc::search::stop::rules_markdown;
 
@@ -25,4 +26,19 @@ fn service_docs_name_the_formats_the_service_decodes() {
         text.contains(&format!("**formats**: {formats} (")),
         "docs/service.md's formats do not read `{formats}`"
     );
+}
+
+#[test]
+fn the_config_readme_and_service_docs_give_each_models_verification_floor() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let floors = bowloc::geometry::verify::Model::default_floors();
+    for doc in ["config/default.toml", "README.md", "docs/service.md"] {
+        // the config's comment wraps lines: compare with its words joined
+        let text = std::fs::read_to_string(root.join(doc)).unwrap();
+        let words: Vec<&str> = text.split_whitespace().filter(|w| *w != "#").collect();
+        assert!(
+            words.join(" ").contains(&floors),
+            "{doc} does not give the floors `{floors}`"
+        );
+    }
 }

@@ -374,9 +374,9 @@ pub struct VerifyArgs {
     /// Vote candidates verified.
     #[arg(long, default_value_t = VerifyParams::default().top_k)]
     pub verify_top_k: usize,
-    /// Inliers for a candidate to count as verified (and matches for it to
-    /// be fitted at all) [default: 6 for a similarity, 12 for the other models]
-    #[arg(long)]
+    /// Inliers for a candidate to count as verified (and word pairs for it
+    /// to be fitted at all); unset, the model's own.
+    #[arg(long, help = min_inliers_help())]
     pub min_inliers: Option<usize>,
     /// Skip words giving more (query, map) pairs than this between two images.
     #[arg(long, default_value_t = VerifyParams::default().max_word_pairs)]
@@ -406,6 +406,14 @@ pub struct VerifyArgs {
     pub stop_log_scale: f32,
 }
 
+/// `--min-inliers`'s help, with every model's default floor.
+fn min_inliers_help() -> String {
+    format!(
+        "Inliers for a candidate to count as verified (and word pairs for it to be fitted at all) [default: the model's: {}]",
+        Model::default_floors()
+    )
+}
+
 impl VerifyArgs {
     pub fn params(&self) -> anyhow::Result<VerifyParams> {
         let p = VerifyParams {
@@ -423,7 +431,7 @@ impl VerifyArgs {
             ..VerifyParams::default()
         };
         p.validate().map_err(anyhow::Error::msg)?;
-        Ok(p)
+        Ok(p.resolved())
     }
 }
 

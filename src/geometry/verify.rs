@@ -152,6 +152,16 @@ impl Model {
             Self::Homography | Self::Fundamental | Self::Affine => 12,
         }
     }
+
+    /// Every model's default floor, for help texts and the docs:
+    /// "similarity 6, homography 12, …".
+    pub fn default_floors() -> String {
+        Self::ALL
+            .iter()
+            .map(|m| format!("{} {}", m.name(), m.default_min_inliers()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
 }
 
 impl Estimator {
@@ -293,6 +303,15 @@ impl VerifyParams {
     pub fn min_inliers(&self) -> usize {
         self.min_inliers
             .unwrap_or_else(|| self.model.default_min_inliers())
+    }
+
+    /// The same settings with the floor written out, so that a record of
+    /// them (an evaluation's `results.json`) says which floor ran.
+    pub fn resolved(self) -> Self {
+        Self {
+            min_inliers: Some(self.min_inliers()),
+            ..self
+        }
     }
 
     pub fn validate(&self) -> Result<(), String> {
@@ -912,6 +931,8 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(set.min_inliers(), 9);
+        assert_eq!(set.clone().resolved(), set);
+        assert_eq!(VerifyParams::default().resolved().min_inliers, Some(6));
         for bad in [
             VerifyParams {
                 top_k: 0,
