@@ -2,7 +2,7 @@
 
 use bowloc::Choice;
 use bowloc::features::{ExtractConfig, SiftParams};
-use bowloc::geometry::verify::{Estimator, Model, Order, VerifyParams};
+use bowloc::geometry::verify::{Estimator, Model, Order, Rerank, VerifyParams};
 use bowloc::search::stop::{GENERIC_PARAMETER, RULES, parse_rule};
 use bowloc::search::{RuleSpec, SearchOptions, TileOrder};
 use bowloc::sequence::{Motion, SequenceModel};
@@ -388,6 +388,9 @@ pub struct VerifyArgs {
     /// Order of the verified candidates.
     #[arg(long, default_value_t = VerifyParams::default().order, value_parser = choice_parser::<Order>())]
     pub verify_order: Order,
+    /// Which checked candidates that order moves.
+    #[arg(long, default_value_t = VerifyParams::default().rerank, value_parser = choice_parser::<Rerank>())]
+    pub verify_rerank: Rerank,
     /// Geometric model.
     #[arg(long, default_value_t = VerifyParams::default().model, value_parser = choice_parser::<Model>())]
     pub model: Model,
@@ -423,6 +426,7 @@ impl VerifyArgs {
             max_word_pairs: self.max_word_pairs,
             max_hamming: self.max_hamming,
             order: self.verify_order,
+            rerank: self.verify_rerank,
             model: self.model,
             estimator: self.estimator,
             threshold_px: self.inlier_px,

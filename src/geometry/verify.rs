@@ -64,6 +64,39 @@ pub enum Order {
     PlaceScale,
 }
 
+/// Which of the checked candidates verification moves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Rerank {
+    /// The answer only: the order's first candidate leads, and the others
+    /// follow in vote order. A wrong candidate with a few inliers can then
+    /// take the first place only, never push the right one out of the
+    /// top five (docs/results.md, "Re-ranking the answer only").
+    Answer,
+    /// Every checked candidate takes its place in the order.
+    All,
+}
+
+impl Rerank {
+    /// Every choice, the default first.
+    pub const ALL: [Rerank; 2] = [Rerank::Answer, Rerank::All];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Answer => "answer",
+            Self::All => "all",
+        }
+    }
+
+    /// What it does, in a line (for help texts).
+    pub fn about(self) -> &'static str {
+        match self {
+            Self::Answer => "the order's first candidate leads; the others follow in vote order",
+            Self::All => "every checked candidate in the order",
+        }
+    }
+}
+
 impl Order {
     /// Every order, the default first.
     pub const ALL: [Order; 4] = [
@@ -185,6 +218,7 @@ impl Estimator {
 }
 
 named_choice!(Order, "order");
+named_choice!(Rerank, "re-ranking");
 named_choice!(Model, "model");
 named_choice!(Estimator, "estimator");
 
@@ -247,6 +281,8 @@ pub struct VerifyParams {
     pub max_hamming: u32,
     /// How the checked candidates are ordered.
     pub order: Order,
+    /// Whether that order places every checked candidate or the answer only.
+    pub rerank: Rerank,
     pub model: Model,
     pub estimator: Estimator,
     /// See [`FitParams::threshold_px`].
@@ -276,6 +312,7 @@ impl Default for VerifyParams {
             max_word_pairs: 4,
             max_hamming: 16,
             order: Order::PlaceScale,
+            rerank: Rerank::Answer,
             model: Model::Similarity,
             estimator: Estimator::Magsac,
             threshold_px: 8.0,
@@ -579,6 +616,8 @@ pub struct Reranked {
     /// own id, or that of the place's leader it was moved ahead of
     /// ([`Order::PlaceScale`]), as it carries the place's score.
     pub distinct_from: u32,
+    /// Its place in the vote order.
+    vote_rank: usize,
 }
 
 impl Reranked {
@@ -595,7 +634,9 @@ impl Reranked {
 
 /// Verify the first `params.top_k` of `candidates` (id, vote score; best
 /// first) and order them as `params.order` says, ties kept in vote order;
-/// candidates beyond the top k follow in vote order. `place_window`: the
+/// candidates beyond the top k follow in vote order. With
+/// [`Rerank::Answer`] only the order's first candidate moves: the others
+/// stay in vote order behind it. `place_window`: the
 /// images on each side of an image, along the map's order, that belong to
 /// its place ([`Order::Place`]).
 pub fn rerank(
@@ -625,6 +666,7 @@ pub fn rerank(
                 verification,
                 inlier_pairs,
                 distinct_from: id,
+                vote_rank: i,
             }
         })
         .collect();
@@ -657,6 +699,9 @@ pub fn rerank(
                 nearest_scale_first(&mut out[..k], place_window);
             }
         }
+    }
+    if params.rerank == Rerank::Answer && !out.is_empty() {
+        out[1..].sort_by_key(|r| r.vote_rank);
     }
     out
 }
@@ -785,10 +830,12 @@ mod tests {
         assert!(out[1].inlier_pairs.is_empty());
     }
 
-    /// Default settings with verification `order`.
+    /// Default settings with verification `order` placing every checked
+    /// candidate.
     fn in_order(order: Order) -> VerifyParams {
         VerifyParams {
             order,
+            rerank: Rerank::All,
             ..Default::default()
         }
     }
@@ -897,6 +944,16 @@ mod tests {
         let out = all_inliers(&map, &votes, &query, in_order(Order::PlaceScale), 2);
         let from: Vec<(u32, u32)> = out.iter().map(|r| (r.id, r.distinct_from)).collect();
         assert_eq!(from, [(1, 0), (0, 0), (2, 2), (5, 5)]);
+        // re-ranking the answer only: image 1 leads, the others keep their
+        // vote order (image 5, with no inliers, second) and their scores
+        let answer_only = VerifyParams {
+            rerank: Rerank::Answer,
+            ..in_order(Order::PlaceScale)
+        };
+        let out = all_inliers(&map, &votes, &query, answer_only, 2);
+        assert_eq!(scores(&out), [(1, 50.0), (5, 0.0), (0, 50.0), (2, 50.0)]);
+        let from: Vec<(u32, u32)> = out.iter().map(|r| (r.id, r.distinct_from)).collect();
+        assert_eq!(from, [(1, 0), (5, 5), (0, 0), (2, 2)]);
         // an unverified candidate is not a choice: with 14 inliers needed
         // image 1 still is, with 15 it is not and image 0 (0.7) stays ahead
         // of image 2 (1.5)

@@ -826,8 +826,9 @@ mod tests {
             );
         }
         // every verification order, model and estimator, quoted
-        use crate::geometry::verify::{Estimator, Model, Order};
+        use crate::geometry::verify::{Estimator, Model, Order, Rerank};
         let names = (Order::ALL.iter().map(|o| o.name()))
+            .chain(Rerank::ALL.iter().map(|r| r.name()))
             .chain(Model::ALL.iter().map(|m| m.name()))
             .chain(Estimator::ALL.iter().map(|e| e.name()));
         for name in names {
