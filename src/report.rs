@@ -29,7 +29,9 @@ pub fn draw_seed() -> u64 {
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Localization {
     /// Best map images first (at most `top_n`); empty when the image has no
-    /// features.
+    /// features. With verification the first is the verified answer and,
+    /// with `verify.rerank = "answer"` (the default), the others follow in
+    /// vote order.
     pub candidates: Vec<Candidate>,
     pub features: FeatureUse,
     /// How much of the image was extracted (streaming extraction).
@@ -255,9 +257,9 @@ pub struct Candidate {
     pub name: String,
     /// Without verification: the estimated full bag-of-words tf-idf score.
     /// With verification: the inlier count of its place, its own plus its
-    /// checked neighbours' (`verify.order = "place"`, the default), or its
-    /// own (0 for a candidate beyond the verified top k). Either way
-    /// comparable across queries.
+    /// checked neighbours' (`verify.order = "place-scale"`, the default, or
+    /// `"place"`), or its own (0 for a candidate beyond the verified top k).
+    /// Either way comparable across queries.
     pub score: f32,
     /// Its votes h against the best image outside its place (the images
     /// within `search.place_window` along the map's order):
