@@ -407,6 +407,14 @@ pub struct VerifyArgs {
     /// inliers show the scene within e^±this of the query's scale.
     #[arg(long, default_value_t = VerifyParams::default().stop_log_scale)]
     pub stop_log_scale: f32,
+    /// --max-hamming for the checks of the rules `verified` and
+    /// `or_verified`.
+    #[arg(long, default_value_t = VerifyParams::default().stop_max_hamming)]
+    pub stop_max_hamming: u32,
+    /// --max-word-pairs for the checks of the rules `verified` and
+    /// `or_verified`.
+    #[arg(long, default_value_t = VerifyParams::default().stop_max_word_pairs)]
+    pub stop_max_word_pairs: usize,
 }
 
 /// `--min-inliers`'s help, with every model's default floor.
@@ -432,6 +440,8 @@ impl VerifyArgs {
             threshold_px: self.inlier_px,
             max_iters: self.fit_iters,
             stop_log_scale: self.stop_log_scale,
+            stop_max_hamming: self.stop_max_hamming,
+            stop_max_word_pairs: self.stop_max_word_pairs,
             ..VerifyParams::default()
         };
         p.validate().map_err(anyhow::Error::msg)?;

@@ -178,7 +178,8 @@ pub struct LeaderVerifier<'a> {
 impl LeaderCheck for LeaderVerifier<'_> {
     fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize {
         let query = with_keypoints(voted, self.keypoints);
-        verify_leader(self.map, image, &query, self.fit, self.params).inliers
+        let params = self.params.for_stop(0);
+        verify_leader(self.map, image, &query, self.fit, &params).inliers
     }
 
     fn answer(
@@ -188,12 +189,7 @@ impl LeaderCheck for LeaderVerifier<'_> {
         min_inliers: usize,
     ) -> Option<CheckedAnswer> {
         let query = with_keypoints(voted, self.keypoints);
-        // a floor under the stop's m would let `place-scale` answer with a
-        // candidate too weak to stop on, and hide a stronger one of its place
-        let params = VerifyParams {
-            min_inliers: Some(self.params.min_inliers().max(min_inliers)),
-            ..self.params.clone()
-        };
+        let params = self.params.for_stop(min_inliers);
         let reranked = rerank(
             self.map,
             candidates,

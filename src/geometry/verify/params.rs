@@ -285,6 +285,10 @@ pub struct VerifyParams {
     /// most e^this times more or less in the map image than in the query
     /// (docs/results.md, "The verified stop at the query's scale").
     pub stop_log_scale: f32,
+    /// [`VerifyParams::max_hamming`] for the geometric stops' checks.
+    pub stop_max_hamming: u32,
+    /// [`VerifyParams::max_word_pairs`] for the geometric stops' checks.
+    pub stop_max_word_pairs: usize,
 }
 
 impl Default for VerifyParams {
@@ -310,6 +314,8 @@ impl Default for VerifyParams {
             confidence: 0.995,
             max_iters: 500,
             stop_log_scale: crate::search::stop::MAX_LOG_SCALE,
+            stop_max_hamming: 16,
+            stop_max_word_pairs: 4,
         }
     }
 }
@@ -333,6 +339,19 @@ impl VerifyParams {
             .unwrap_or_else(|| self.model.default_min_inliers())
     }
 
+    /// The settings a geometric stop verifies with, asking for `m` inliers:
+    /// its own word pairs (`stop_max_hamming`, `stop_max_word_pairs`), and a
+    /// floor of at least m, so that the answer it checks cannot be one too
+    /// weak to stop on ahead of a stronger one of its place.
+    pub fn for_stop(&self, m: usize) -> Self {
+        Self {
+            min_inliers: Some(self.min_inliers().max(m)),
+            max_hamming: self.stop_max_hamming,
+            max_word_pairs: self.stop_max_word_pairs,
+            ..self.clone()
+        }
+    }
+
     /// The same settings with the floor written out, so that a record of
     /// them (an evaluation's `results.json`) says which floor ran.
     pub fn resolved(self) -> Self {
@@ -354,8 +373,8 @@ impl VerifyParams {
                 self.min_inliers()
             ));
         }
-        if self.max_word_pairs == 0 {
-            return Err("max_word_pairs must be at least 1".into());
+        if self.max_word_pairs == 0 || self.stop_max_word_pairs == 0 {
+            return Err("max_word_pairs and stop_max_word_pairs must be at least 1".into());
         }
         if !(self.threshold_px.is_finite() && self.threshold_px > 0.0) {
             return Err(format!(
@@ -396,6 +415,25 @@ mod tests {
     }
 
     #[test]
+    fn a_stop_verifies_with_its_own_pairs_and_at_least_its_m_as_floor() {
+        let p = VerifyParams {
+            max_hamming: 24,
+            max_word_pairs: 8,
+            stop_max_hamming: 10,
+            stop_max_word_pairs: 2,
+            ..Default::default()
+        };
+        let stop = p.for_stop(12);
+        assert_eq!((stop.max_hamming, stop.max_word_pairs), (10, 2));
+        assert_eq!(stop.min_inliers(), 12);
+        // the floor is never lowered below the configured one
+        assert_eq!(p.for_stop(0).min_inliers(), p.min_inliers());
+        // the rest is the answer's
+        assert_eq!(stop.stop_log_scale, p.stop_log_scale);
+        assert_eq!(stop.order, p.order);
+    }
+
+    #[test]
     fn settings_are_checked() {
         assert!(VerifyParams::default().validate().is_ok());
         // every model's default floor is more than its fit takes
@@ -415,6 +453,10 @@ mod tests {
         assert_eq!(set.clone().resolved(), set);
         assert_eq!(VerifyParams::default().resolved().min_inliers, Some(6));
         for bad in [
+            VerifyParams {
+                stop_max_word_pairs: 0,
+                ..Default::default()
+            },
             VerifyParams {
                 top_k: 0,
                 ..Default::default()
