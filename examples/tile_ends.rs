@@ -5,12 +5,14 @@
 //! true match, place-z's statistic, whether that tile's own votes (taken
 //! alone) lead in the same place as all the votes so far, the share of the
 //! whole image's decode and extraction time spent up to then, and the
-//! leader's inliers and its place's (verified as the service verifies,
-//! against the features voted so far), and the answer the service would give
-//! then with verification on (the top k re-ranked in the configured order:
-//! its top-1 and top-5 right or not, the first answer's inliers and the
-//! |ln| of its relative scale, −1 when it has none). A rule that
-//! stops at tile ends can be tried on these rows without a new search.
+//! leader's inliers and its place's (verified as the service's geometric
+//! stops verify, with their word pairs, against the features voted so far),
+//! and the answer the service would give then with verification on (the top
+//! k re-ranked in the configured order: its top-1 and top-5 right or not),
+//! with the inliers and the |ln| of the relative scale (−1 when it has none)
+//! of the first answer a geometric stop would check then (the same re-ranking
+//! with the stops' word pairs). A rule that stops at tile ends can be tried
+//! on these rows without a new search.
 //!
 //! ```sh
 //! cargo run --release --example tile_ends -- ../shared/datasets/gardens-point 5000 1 [GRID] > ends.csv
@@ -61,6 +63,7 @@ fn main() -> anyhow::Result<()> {
     let same_place = |a: u32, b: u32| a.abs_diff(b) <= window;
     bowloc::features::set_opencv_threads(1);
     let verify = VerifyParams::default();
+    let stop = verify.for_stop(0);
     let fit = OpenCvFit::new(verify.fit());
     let images = map.images() as u32;
     println!(
@@ -98,7 +101,7 @@ fn main() -> anyhow::Result<()> {
                 // the leader's inliers against the features so far, and its
                 // place's (the map images within the window, each checked)
                 let seen = with_keypoints(&voted, &query.keypoints);
-                let inliers = |j: u32| verify_leader(&map, j, &seen, &fit, &verify).inliers;
+                let inliers = |j: u32| verify_leader(&map, j, &seen, &fit, &stop).inliers;
                 let (leader_inliers, place_inliers) = voter.tally().leader.map_or((0, 0), |l| {
                     let place = l.saturating_sub(window)..=(l + window).min(images - 1);
                     (inliers(l), place.map(inliers).sum::<usize>())
@@ -112,7 +115,9 @@ fn main() -> anyhow::Result<()> {
                 let reranked = rerank(&map, &votes, &seen, &fit, &verify, window);
                 let vtop1 = reranked.first().is_some_and(|r| truth.contains(&r.id));
                 let vtop5 = reranked.iter().take(5).any(|r| truth.contains(&r.id));
-                let (v_inliers, v_log_scale) = reranked.first().map_or((0, -1.0), |r| {
+                // what a geometric stop checks: the same, with its pairs
+                let checked = rerank(&map, &votes, &seen, &fit, &stop, window);
+                let (v_inliers, v_log_scale) = checked.first().map_or((0, -1.0), |r| {
                     let inliers = r.verification.map_or(0, |v| v.inliers);
                     let scale = relative_scale(&r.inlier_pairs).map_or(-1.0, |s| s.ln().abs());
                     (inliers, scale)
