@@ -378,11 +378,14 @@ pub struct VerifyArgs {
     /// to be fitted at all); unset, the model's own.
     #[arg(long, help = min_inliers_help())]
     pub min_inliers: Option<usize>,
-    /// Skip words giving more (query, map) pairs than this between two images.
+    /// Skip words giving more (query, map) pairs than this between two
+    /// images (the answer's re-ranking; the geometric stops check with
+    /// --stop-max-word-pairs).
     #[arg(long, default_value_t = VerifyParams::default().max_word_pairs)]
     pub max_word_pairs: usize,
     /// Pair two features of a word only when their Hamming signatures differ
-    /// in at most this many bits (64: every pair).
+    /// in at most this many bits (64: every pair; the answer's re-ranking,
+    /// the geometric stops check with --stop-max-hamming).
     #[arg(long, default_value_t = VerifyParams::default().max_hamming)]
     pub max_hamming: u32,
     /// Order of the verified candidates.

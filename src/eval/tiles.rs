@@ -241,13 +241,6 @@ struct CpuTimed<C> {
 }
 
 impl<C: search::LeaderCheck> search::LeaderCheck for CpuTimed<C> {
-    fn inliers(&mut self, image: u32, voted: &[search::Voted]) -> usize {
-        let started = ThreadTime::now();
-        let inliers = self.inner.inliers(image, voted);
-        self.spent += started.elapsed();
-        inliers
-    }
-
     fn answer(
         &mut self,
         candidates: &[(u32, f32)],

@@ -176,12 +176,6 @@ pub struct LeaderVerifier<'a> {
 }
 
 impl LeaderCheck for LeaderVerifier<'_> {
-    fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize {
-        let query = with_keypoints(voted, self.keypoints);
-        let params = self.params.for_stop(0);
-        verify_leader(self.map, image, &query, self.fit, &params).inliers
-    }
-
     fn answer(
         &mut self,
         candidates: &[(u32, f32)],

@@ -265,10 +265,13 @@ pub struct VerifyParams {
     /// [`VerifyParams::min_inliers`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub min_inliers: Option<usize>,
-    /// A word giving more pairs than this between the two images is skipped.
+    /// A word giving more pairs than this between the two images is skipped
+    /// (the answer's re-ranking; the geometric stops' is
+    /// [`VerifyParams::stop_max_word_pairs`]).
     pub max_word_pairs: usize,
     /// Features whose Hamming signatures differ in more bits than this do
-    /// not pair up (64: every pair of a word).
+    /// not pair up (64: every pair of a word; the answer's re-ranking, the
+    /// geometric stops' is [`VerifyParams::stop_max_hamming`]).
     pub max_hamming: u32,
     /// How the checked candidates are ordered.
     pub order: Order,

@@ -10,10 +10,6 @@ use crate::search::vote::VoteStats;
 /// A geometric check against the query features voted so far. Implemented
 /// outside the core (the model fit is OpenCV's).
 pub trait LeaderCheck {
-    /// How many of them are inliers of a model relating map image `image`
-    /// to the query.
-    fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize;
-
     /// The answer verification would give now: `candidates` (id, votes;
     /// best first) verified and re-ranked as the final answer is, with
     /// `min_inliers` (the stop's m) as the floor of a verified candidate if

@@ -334,13 +334,15 @@ struct FakeCheck {
     scale: f32,
 }
 
-impl LeaderCheck for FakeCheck {
+impl FakeCheck {
     fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize {
         self.calls += 1;
         assert!(!voted.is_empty());
         if image == 0 { self.inliers } else { 0 }
     }
+}
 
+impl LeaderCheck for FakeCheck {
     /// Image 0 first when it is a candidate, else the first candidate.
     fn answer(
         &mut self,
@@ -504,10 +506,6 @@ struct Bounds {
 }
 
 impl LeaderCheck for Bounds {
-    fn inliers(&mut self, image: u32, voted: &[Voted]) -> usize {
-        self.check.inliers(image, voted)
-    }
-
     fn answer(
         &mut self,
         candidates: &[(u32, f32)],
@@ -916,10 +914,6 @@ struct RecordingCheck {
 }
 
 impl LeaderCheck for RecordingCheck {
-    fn inliers(&mut self, _image: u32, _voted: &[Voted]) -> usize {
-        0
-    }
-
     fn answer(
         &mut self,
         candidates: &[(u32, f32)],
