@@ -122,9 +122,12 @@ pub fn markdown(report: &VerificationReport) -> String {
     let pct = |s: &Stat| format!("{:.1} ± {:.1}", 100.0 * s.mean, 100.0 * s.runs_std);
     let mut out = format!(
         "## Geometric verification\n\n\
-         The top {} vote candidates of each answer verified ({:?}, {:?}, inlier threshold {} px, \
-         words giving more than {} pairs skipped) and re-ranked by inliers (order `{}`); the \
-         score is then an inlier count. A candidate is verified with at least {} inliers. Recalls in %, on \
+         The top {} vote candidates of each answer verified ({:?}, {:?}, inlier threshold {} px; \
+         features paired within {} bits of their Hamming signatures, words giving more than {} \
+         pairs skipped) and re-ranked by inliers (order `{}`, re-ranking `{}`: {}); the \
+         score is then an inlier count. A candidate is verified with at least {} inliers. The \
+         geometric stops check with their own pairs (within {} bits, at most {} a word) and stop \
+         only on an answer at the query's scale (within e^±{}). Recalls in %, on \
          the first vocabulary, mean ± standard deviation over runs; verification time per \
          query in ms.\n\n\
          | setting | verify | recall@1 | recall@5 | recall top-1 @90% P | recall top-1 @90% P by distinctness | recall top-5 @90% P | verify ms median | p95 | top verified | verified top correct |\n\
@@ -133,9 +136,15 @@ pub fn markdown(report: &VerificationReport) -> String {
         p.model,
         p.fit().estimator_used(),
         p.threshold_px,
+        p.max_hamming,
         p.max_word_pairs,
         p.order,
-        p.min_inliers()
+        p.rerank.name(),
+        p.rerank.about(),
+        p.min_inliers(),
+        p.stop_max_hamming,
+        p.stop_max_word_pairs,
+        p.stop_log_scale
     );
     for r in &report.rows {
         for (name, x) in [("no", &r.without), ("yes", &r.with)] {
