@@ -280,6 +280,16 @@ pub struct Candidate {
     /// configured `min_inliers`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub verified: Option<bool>,
+    /// With verification, for a verified candidate: how much larger the
+    /// map image sees the scene than the query, the spread of its inliers
+    /// in the map image over their spread in the query (both images
+    /// downscaled to the extraction frame). Above 1 the map image was taken
+    /// nearer what both show (along a route: ahead of the query), below 1
+    /// further from it; the default order answers with the verified image
+    /// of the place whose scale is nearest 1.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(exclusive_minimum = 0)]
+    pub scale: Option<f32>,
     /// Place label, when the map has one for this image.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub place: Option<String>,
@@ -440,6 +450,7 @@ impl Candidate {
             votes: None,
             inliers: None,
             verified: None,
+            scale: None,
             place: info.place.map(str::to_owned),
             pose: info
                 .pose
@@ -595,6 +606,7 @@ impl Localization {
                 c.votes = Some(r.votes);
                 c.inliers = r.verification.map(|v| v.inliers as u32);
                 c.verified = r.verification.map(|v| v.verified);
+                c.scale = r.verification.filter(|v| v.verified).and(r.scale());
                 // a posterior (rule `posterior`, a sequence) stays the image's
                 c.probability = voted(r.id).and_then(|v| v.probability);
                 c

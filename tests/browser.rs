@@ -285,6 +285,18 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
             >= 12
     })
     .await;
+    // the verified top candidate says at what scale its map image sees the scene
+    let caption = js(
+        &client,
+        "return document.querySelector('#candidates li.candidate figcaption').textContent",
+    )
+    .await;
+    assert!(
+        caption
+            .as_str()
+            .is_some_and(|c| c.contains("verified · scale ")),
+        "{caption}"
+    );
     let error_hidden = js(&client, "return document.getElementById('error').hidden").await;
     assert_eq!(error_hidden, json!(true));
 

@@ -113,6 +113,11 @@ async fn protobuf_answer_carries_the_json_answer() {
         assert_eq!(p.id as u64, j["id"].as_u64().unwrap());
         assert_eq!(p.name, j["name"].as_str().unwrap());
         assert!((p.score as f64 - j["score"].as_f64().unwrap()).abs() < 1e-6);
+        assert_eq!(p.verified, j["verified"].as_bool());
+        match (p.scale, j["scale"].as_f64()) {
+            (Some(a), Some(b)) => assert!((f64::from(a) - b).abs() < 1e-6, "{a} {b}"),
+            (a, b) => assert_eq!((a, b), (None, None)),
+        }
     }
     // Image 5.jpg is map image 4: with the same seed it must come first.
     assert_eq!(pb.candidates[0].name, "images/5.jpg");

@@ -127,6 +127,15 @@ fn verification_raises_recall_at_1_of_an_early_stopped_search() {
         "{top:?}"
     );
     assert_eq!(top.verified, Some(true));
+    // a verified candidate reports the scale of its view, the others none
+    assert!(top.scale.is_some_and(|s| s > 0.0), "{top:?}");
+    assert!(
+        answer
+            .candidates
+            .iter()
+            .all(|c| c.scale.is_some() == (c.verified == Some(true))),
+        "{answer:?}"
+    );
     // the default order scores the inliers of the candidate's place: its
     // own and its checked neighbours'
     assert!(top.score >= top.inliers.unwrap() as f32, "{top:?}");

@@ -101,6 +101,7 @@ fn candidate(c: &Candidate) -> pb::Candidate {
         votes: c.votes,
         inliers: c.inliers,
         verified: c.verified,
+        scale: c.scale,
         place: c.place.clone(),
         pose: c.pose.clone().unwrap_or_default(),
         probability: c.probability,

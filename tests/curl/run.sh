@@ -224,7 +224,8 @@ check "tile_order=spread is reported and extracts every tile" jqt --arg s "$stat
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=place-z&threshold=2&or_verified=12&seed=3")
 check "or_verified=12 beside place-z is reported and verifies the answer ($(jq -c .stop.detail "$B"))" jqt --arg s "$status" '
   $s == "200" and .rule.name == "place-z" and .rule.or_verified == 12
-  and (.candidates[0] | has("inliers") and has("verified"))' "$B"
+  and (.candidates[0] | has("inliers") and has("verified"))
+  and all(.candidates[]; if .verified == true then .scale > 0 else (has("scale") | not) end)' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?seed=3")
 check "the default rule has its verified stop of 12 inliers" jqt --arg s "$status" '
   $s == "200" and .rule == {"name": "place-z", "parameter": "threshold", "value": 2.25, "or_verified": 12}' "$B"

@@ -17,7 +17,6 @@ pub use ranking::{Reranked, rerank};
 use super::Keypoint;
 use super::matches::{Correspondences, QueryFeature, QueryFeatures, tentative};
 use super::packed::PackedFeature;
-use super::relative_scale::relative_scale;
 use crate::index::MapRead;
 use crate::search::stop::CheckedAnswer;
 use crate::search::{LeaderCheck, Voted};
@@ -195,7 +194,7 @@ impl LeaderCheck for LeaderVerifier<'_> {
         reranked.first().map(|r| CheckedAnswer {
             id: r.id,
             inliers: r.inliers(),
-            scale: relative_scale(&r.inlier_pairs),
+            scale: r.scale(),
         })
     }
 

@@ -49,7 +49,7 @@ pub enum Order {
     Place,
     /// [`Order::Place`], then the first place answers with its verified
     /// candidate whose inliers show the scene at the scale nearest the
-    /// query's ([`super::relative_scale`]): of the map images that see the
+    /// query's ([`relative_scale`](crate::geometry::relative_scale::relative_scale)): of the map images that see the
     /// place, the one taken nearest the query along the way. It keeps the
     /// place's score.
     PlaceScale,

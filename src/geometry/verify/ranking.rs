@@ -37,6 +37,12 @@ impl Reranked {
     pub(super) fn inliers(&self) -> usize {
         self.verification.map_or(0, |v| v.inliers)
     }
+
+    /// How much larger the map image sees the scene than the query, from
+    /// its inliers ([`relative_scale`]); `None` with fewer than two.
+    pub fn scale(&self) -> Option<f32> {
+        relative_scale(&self.inlier_pairs)
+    }
 }
 
 /// Verify the first `params.top_k` of `candidates` (id, vote score; best
@@ -125,7 +131,7 @@ fn nearest_scale_first(ranked: &mut [Reranked], place_window: u32) {
         .enumerate()
         .filter(|(_, r)| r.id.abs_diff(leader) <= place_window)
         .filter(|(_, r)| r.verification.is_some_and(|v| v.verified))
-        .filter_map(|(i, r)| Some((i, relative_scale(&r.inlier_pairs)?.ln().abs())))
+        .filter_map(|(i, r)| Some((i, r.scale()?.ln().abs())))
         .min_by(|a, b| a.1.total_cmp(&b.1));
     if let Some((i, _)) = nearest {
         ranked[..=i].rotate_right(1);

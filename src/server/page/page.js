@@ -271,7 +271,9 @@ function drawCandidates(answer) {
       `#${c.rank} ${c.place ? c.place + " · " : ""}${c.name}`,
       answer.verified === undefined
         ? `score ${fmt(c.score)}`
-        : `${c.inliers ?? 0} inliers${c.verified ? " ✔ verified" : ""} · votes ${fmt(c.votes)}`,
+        : `${c.inliers ?? 0} inliers${c.verified ? " ✔ verified" : ""}` +
+          (c.scale === undefined ? "" : ` · scale ${c.scale.toFixed(2)}`) +
+          ` · votes ${fmt(c.votes)}`,
     ];
     if (fullTop && c.rank === 1) {
       lines.push(fullTop.id === c.id ? "full search agrees" : `full search: #1 is ${fullTop.name}`);
