@@ -20,7 +20,6 @@ use bowloc::eval::cache;
 use bowloc::features::TileGrid;
 use bowloc::features::fit::OpenCvFit;
 use bowloc::geometry::ratio_matches::{RATIO, ratio_correspondences};
-use bowloc::geometry::relative_scale::relative_scale;
 use bowloc::geometry::verify::{VerifyParams, count_inliers, rerank, with_keypoints};
 use bowloc::pipeline::code;
 use bowloc::search::rank::top_n;
@@ -119,9 +118,7 @@ fn main() -> anyhow::Result<()> {
         for (rank, r) in top.iter().enumerate() {
             let x = reranked.iter().find(|x| x.id == r.id);
             let v = x.and_then(|x| x.verification);
-            let scale = x
-                .and_then(|x| relative_scale(&x.inlier_pairs))
-                .unwrap_or(1.0);
+            let scale = x.and_then(|x| x.scale()).unwrap_or(1.0);
             let desc = if descriptors {
                 format!(",{},{words_ms:.3},{desc_ms:.3}", desc_inliers[rank])
             } else {

@@ -606,7 +606,10 @@ impl Localization {
                 c.votes = Some(r.votes);
                 c.inliers = r.verification.map(|v| v.inliers as u32);
                 c.verified = r.verification.map(|v| v.verified);
-                c.scale = r.verification.filter(|v| v.verified).and(r.scale());
+                c.scale = r
+                    .verification
+                    .filter(|v| v.verified)
+                    .and_then(|_| r.scale());
                 // a posterior (rule `posterior`, a sequence) stays the image's
                 c.probability = voted(r.id).and_then(|v| v.probability);
                 c

@@ -34,7 +34,8 @@ impl Reranked {
         self.score
     }
 
-    pub(super) fn inliers(&self) -> usize {
+    /// Its inliers (0 when not checked).
+    pub fn inliers(&self) -> usize {
         self.verification.map_or(0, |v| v.inliers)
     }
 
