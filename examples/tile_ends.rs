@@ -11,7 +11,9 @@
 //! k re-ranked in the configured order: its top-1 and top-5 right or not),
 //! with the inliers and the |ln| of the relative scale (−1 when it has none)
 //! of the first answer a geometric stop would check then (the same re-ranking
-//! with the stops' word pairs). A rule that stops at tile ends can be tried
+//! with the stops' word pairs): at the default floor (`v_`, what `verified 6`
+//! checks) and at the floors of m = 8 and 12 (`v8_`, `v12_`), which a stop
+//! asking for m inliers raises. A rule that stops at tile ends can be tried
 //! on these rows without a new search.
 //!
 //! ```sh
@@ -24,7 +26,6 @@ use bowloc::eval::cache;
 use bowloc::eval::sweep::seed;
 use bowloc::features::TileGrid;
 use bowloc::features::fit::OpenCvFit;
-use bowloc::geometry::relative_scale::relative_scale;
 use bowloc::geometry::verify::{VerifyParams, rerank, verify_leader, with_keypoints};
 use bowloc::pipeline::code;
 use bowloc::search::rank::top_n;
@@ -63,11 +64,13 @@ fn main() -> anyhow::Result<()> {
     let same_place = |a: u32, b: u32| a.abs_diff(b) <= window;
     bowloc::features::set_opencv_threads(1);
     let verify = VerifyParams::default();
-    let stop = verify.for_stop(0);
+    // what the geometric stops check, with their word pairs, at the
+    // default floor (`verified 6`) and at the floors of m = 8 and 12
+    let stops = [0, 8, 12].map(|m| verify.for_stop(m));
     let fit = OpenCvFit::new(verify.fit());
     let images = map.images() as u32;
     println!(
-        "seed,run,query,tile,tiles,time_share,top1,top5,z,tile_agrees,tile_leader_z,leader,tile_leader,features,total,leader_inliers,place_inliers,vtop1,vtop5,v_inliers,v_log_scale"
+        "seed,run,query,tile,tiles,time_share,top1,top5,z,tile_agrees,tile_leader_z,leader,tile_leader,features,total,leader_inliers,place_inliers,vtop1,vtop5,v_inliers,v_log_scale,v8_inliers,v8_log_scale,v12_inliers,v12_log_scale"
     );
     for q in 0..queries.len() {
         let truth = &dataset.truth[q];
@@ -101,7 +104,7 @@ fn main() -> anyhow::Result<()> {
                 // the leader's inliers against the features so far, and its
                 // place's (the map images within the window, each checked)
                 let seen = with_keypoints(&voted, &query.keypoints);
-                let inliers = |j: u32| verify_leader(&map, j, &seen, &fit, &stop).inliers;
+                let inliers = |j: u32| verify_leader(&map, j, &seen, &fit, &stops[0]).inliers;
                 let (leader_inliers, place_inliers) = voter.tally().leader.map_or((0, 0), |l| {
                     let place = l.saturating_sub(window)..=(l + window).min(images - 1);
                     (inliers(l), place.map(inliers).sum::<usize>())
@@ -115,12 +118,13 @@ fn main() -> anyhow::Result<()> {
                 let reranked = rerank(&map, &votes, &seen, &fit, &verify, window);
                 let vtop1 = reranked.first().is_some_and(|r| truth.contains(&r.id));
                 let vtop5 = reranked.iter().take(5).any(|r| truth.contains(&r.id));
-                // what a geometric stop checks: the same, with its pairs
-                let checked = rerank(&map, &votes, &seen, &fit, &stop, window);
-                let (v_inliers, v_log_scale) = checked.first().map_or((0, -1.0), |r| {
-                    let inliers = r.verification.map_or(0, |v| v.inliers);
-                    let scale = relative_scale(&r.inlier_pairs).map_or(-1.0, |s| s.ln().abs());
-                    (inliers, scale)
+                // what a geometric stop checks: the same, with its pairs and
+                // its floor
+                let [v, v8, v12] = stops.each_ref().map(|stop| {
+                    let checked = rerank(&map, &votes, &seen, &fit, stop, window);
+                    checked.first().map_or((0, -1.0), |r| {
+                        (r.inliers(), r.scale().map_or(-1.0, |s| s.ln().abs()))
+                    })
                 });
                 let top5 = top.iter().any(|r| truth.contains(&r.id));
                 let z = z_rule.statistic(&voter).map_or(0.0, |s| s.0);
@@ -130,7 +134,7 @@ fn main() -> anyhow::Result<()> {
                     _ => false,
                 };
                 println!(
-                    "{},{run},{q},{},{},{:.4},{},{},{z:.4},{},{alone_z:.4},{},{},{},{},{leader_inliers},{place_inliers},{},{},{v_inliers},{v_log_scale:.4}",
+                    "{},{run},{q},{},{},{:.4},{},{},{z:.4},{},{alone_z:.4},{},{},{},{},{leader_inliers},{place_inliers},{},{},{},{:.4},{},{:.4},{},{:.4}",
                     vocab.meta().seed,
                     k + 1,
                     order.len(),
@@ -144,6 +148,12 @@ fn main() -> anyhow::Result<()> {
                     coded.words.len(),
                     u8::from(vtop1),
                     u8::from(vtop5),
+                    v.0,
+                    v.1,
+                    v8.0,
+                    v8.1,
+                    v12.0,
+                    v12.1,
                 );
             }
         }
