@@ -641,8 +641,8 @@ impl utoipa::PartialSchema for StopInfo {
             .description(Some("Where and why the search stopped."))
             .property(
                 "kind",
-                text("`rule`: the stopping rule fired; `exhausted`: every feature was used; `deadline`: the request's deadline passed (the answer so far).")
-                    .enum_values(Some(["rule", "exhausted", "deadline"])),
+                text("`rule`: the stopping rule fired; `exhausted`: every feature was used; `deadline`: the request's deadline passed (the answer so far); `budget`: the next tile would not have ended within the request's `budget_ms` (the answer so far).")
+                    .enum_values(Some(["rule", "exhausted", "deadline", "budget"])),
             )
             .required("kind")
             .property(
@@ -693,7 +693,7 @@ mod tests {
         let kinds: Vec<serde_json::Value> = object(schema.properties["kind"].clone())
             .enum_values
             .unwrap();
-        for kind in [StopKind::Rule, StopKind::Exhausted, StopKind::Deadline] {
+        for kind in StopKind::ALL {
             let value = serde_json::to_value(StopInfo {
                 kind,
                 at_feature: 3,

@@ -6,7 +6,6 @@ mod common;
 
 use bowloc::dataset::Dataset;
 use bowloc::features::{DecodeLimits, ExtractConfig};
-use bowloc::pipeline::Localizer;
 use bowloc::search::{RuleSpec, SearchOptions};
 use std::process::Command;
 
@@ -21,16 +20,11 @@ const RECALL_AT_5_FLOOR: f64 = 0.90;
 
 #[test]
 fn rtabmap_loop_recall_at_5_with_full_bow() {
-    let common::RealMap {
-        data, vocab, map, ..
-    } = common::real_map("rtabmap-loop", 1000);
-    assert_eq!(map.images(), 40);
+    let real = common::real_map("rtabmap-loop", 1000);
+    assert_eq!(real.map.images(), 40);
+    let data = &real.data;
 
-    let dir = tempfile::tempdir().unwrap();
-    let (vpath, mpath) = (dir.path().join("v.bowvoc"), dir.path().join("m.bowmap"));
-    vocab.save(&vpath).unwrap();
-    map.save(&mpath).unwrap();
-    let localizer = Localizer::open(&vpath, &mpath, true).unwrap();
+    let localizer = real.localizer(true);
 
     let options = SearchOptions {
         rule: RuleSpec::new("none", None).unwrap(),
@@ -340,6 +334,71 @@ fn cli_reports_bad_input_clearly() {
     for good in [&answers[0], &answers[2]] {
         assert!(good.get("error").is_none(), "{good}");
         assert!(!good["candidates"].as_array().unwrap().is_empty(), "{good}");
+    }
+}
+
+/// A time budget ends a streamed search at a tile end, after at least one
+/// tile, with the answer of the votes so far; a budget every tile fits in
+/// changes nothing, and a query extracted whole is never cut.
+#[test]
+fn a_time_budget_ends_the_search_at_a_tile_end() {
+    use bowloc::features::TileGrid;
+    use bowloc::search::StopKind;
+    use std::time::Duration;
+    let real = common::real_map("rtabmap-loop", 1000);
+    let localizer = real.localizer(true);
+    let grid: TileGrid = "2x2+24".parse().unwrap();
+    let free = SearchOptions {
+        rule: RuleSpec::new("none", None).unwrap(),
+        top_n: 5,
+        seed: 1,
+        ..Default::default()
+    };
+    let tight = SearchOptions {
+        budget: Some(Duration::from_micros(1)),
+        ..free.clone()
+    };
+    let loose = SearchOptions {
+        budget: Some(Duration::from_secs(600)),
+        ..free.clone()
+    };
+    let ids =
+        |a: &bowloc::report::Localization| a.candidates.iter().map(|c| c.id).collect::<Vec<_>>();
+    for q in real.data.queries.iter().step_by(9) {
+        let cut = localizer
+            .localize_file(&q.path, &tight, Some(grid))
+            .unwrap();
+        assert_eq!(
+            cut.stop.kind,
+            StopKind::Budget,
+            "{}: {:?}",
+            q.name,
+            cut.stop
+        );
+        assert!(
+            cut.stop.detail.contains("time budget 0.0 ms"),
+            "{}",
+            cut.stop.detail
+        );
+        assert_eq!((cut.tiles.extracted, cut.tiles.total), (1, 4), "{}", q.name);
+        assert!(cut.features.used > 0, "{}", q.name);
+        assert!(!cut.candidates.is_empty(), "{}", q.name);
+
+        let all = localizer.localize_file(&q.path, &free, Some(grid)).unwrap();
+        let fits = localizer
+            .localize_file(&q.path, &loose, Some(grid))
+            .unwrap();
+        assert_eq!(fits.tiles.extracted, 4, "{}", q.name);
+        assert_eq!(fits.stop.kind, all.stop.kind, "{}", q.name);
+        assert_eq!(fits.features.used, all.features.used, "{}", q.name);
+        assert_eq!(ids(&fits), ids(&all), "{}", q.name);
+        assert!(cut.features.used < all.features.used, "{}", q.name);
+
+        let whole = localizer
+            .localize_file(&q.path, &tight, Some(TileGrid::WHOLE))
+            .unwrap();
+        assert_eq!(whole.stop.kind, StopKind::Exhausted, "{}", q.name);
+        assert_eq!(whole.features.used, whole.features.total, "{}", q.name);
     }
 }
 

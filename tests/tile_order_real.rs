@@ -6,7 +6,6 @@
 mod common;
 
 use bowloc::features::TileGrid;
-use bowloc::pipeline::Localizer;
 use bowloc::search::{SearchOptions, TileOrder};
 
 /// Three requests per query (seeds 0..3), the default rule. Printed by this
@@ -23,14 +22,9 @@ const MAX_LOSS: f64 = 0.02;
 
 #[test]
 fn the_richest_tiles_first_extract_less_for_the_same_answers() {
-    let common::RealMap {
-        data, vocab, map, ..
-    } = common::real_map("rtabmap-loop", 1000);
-    let dir = tempfile::tempdir().unwrap();
-    let (vpath, mpath) = (dir.path().join("v.bowvoc"), dir.path().join("m.bowmap"));
-    vocab.save(&vpath).unwrap();
-    map.save(&mpath).unwrap();
-    let localizer = Localizer::open(&vpath, &mpath, false).unwrap();
+    let real = common::real_map("rtabmap-loop", 1000);
+    let localizer = real.localizer(false);
+    let data = &real.data;
     let grid = TileGrid::DEFAULT;
     let measure = |order: TileOrder| -> (f64, f64) {
         let (mut tiles, mut right, mut n) = (0.0, 0, 0);

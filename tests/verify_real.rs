@@ -9,7 +9,7 @@ use bowloc::features::fit::OpenCvFit;
 use bowloc::geometry::Keypoint;
 use bowloc::geometry::matches::QueryFeature;
 use bowloc::geometry::verify::{VerifyParams, rerank};
-use bowloc::pipeline::{Localizer, words_per_image};
+use bowloc::pipeline::words_per_image;
 use bowloc::search::{RuleSpec, SearchOptions, permute, search_words};
 
 /// Rule `fixed` at 30 % of the features over three feature orders, K = 1000,
@@ -28,12 +28,14 @@ const MIN_VERIFIED_PRECISION: f64 = 0.95;
 
 #[test]
 fn verification_raises_recall_at_1_of_an_early_stopped_search() {
+    let real = common::real_map("rtabmap-loop", 1000);
+    let mut localizer = real.localizer(true);
     let common::RealMap {
         data,
         vocab,
         map,
         queries: query_features,
-    } = common::real_map("rtabmap-loop", 1000);
+    } = real;
     let query_words = words_per_image(&vocab, &query_features);
 
     let params = VerifyParams::default();
@@ -104,11 +106,6 @@ fn verification_raises_recall_at_1_of_an_early_stopped_search() {
     );
 
     // The localizer end to end: verified answers carry inliers and the time.
-    let dir = tempfile::tempdir().unwrap();
-    let (vpath, mpath) = (dir.path().join("v.bowvoc"), dir.path().join("m.bowmap"));
-    vocab.save(&vpath).unwrap();
-    map.save(&mpath).unwrap();
-    let mut localizer = Localizer::open(&vpath, &mpath, true).unwrap();
     localizer.set_verify(VerifyParams {
         enabled: true,
         ..VerifyParams::default()

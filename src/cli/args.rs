@@ -180,6 +180,20 @@ pub struct SearchArgs {
     /// The order tiles are extracted in.
     #[arg(long, default_value_t = SearchOptions::recommended().tile_order, value_parser = choice_parser::<TileOrder>())]
     pub tile_order: TileOrder,
+    /// A time budget per image, in milliseconds from the start of decoding:
+    /// a next tile is extracted only when it is expected to end within it
+    /// (the first tile always; the stop kind is then `budget`).
+    #[arg(long, value_parser = budget_ms)]
+    pub budget_ms: Option<std::time::Duration>,
+}
+
+/// `--budget-ms`, checked as the service checks `budget_ms`.
+fn budget_ms(text: &str) -> Result<std::time::Duration, String> {
+    let ms: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{text}` is not a number"))?;
+    bowloc::search::budget::check_ms(ms)
 }
 
 impl SearchArgs {
@@ -242,6 +256,7 @@ impl SearchArgs {
             min_score: self.min_score,
             min_distinct: self.min_distinct,
             deadline: None,
+            budget: self.budget_ms,
             prior: None,
             hamming: if self.no_hamming {
                 None

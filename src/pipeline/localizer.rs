@@ -214,9 +214,11 @@ impl Localizer {
     /// the one [`Localizer::grid_for`] chose for `rule` without being
     /// `asked` for one.
     pub fn learn(&self, rule: &search::RuleSpec, asked: Option<TileGrid>, answer: &Localization) {
+        // a search its time budget cut short says nothing of what a plan costs
         if let Some(choice) = &self.coarse_choice
             && asked.is_none()
             && rule.info().stops_early
+            && answer.stop.kind != search::StopKind::Budget
         {
             let t = &answer.timings_ms;
             choice.record(
@@ -291,6 +293,21 @@ impl Localizer {
         let mut keypoints: Vec<Keypoint> = Vec::new();
         let mut tiles_used = 0;
         loop {
+            // a budget ends a search only where a tile is left to skip
+            if let Some(budget) = options
+                .budget
+                .filter(|_| !search.stopped() && tiles.extracted() < tiles.total())
+            {
+                let fits = search::budget::next_tile_fits(
+                    budget,
+                    started.elapsed(),
+                    decoded.elapsed(),
+                    tiles_used,
+                );
+                if let Err(why) = fits {
+                    search.end(search::StopKind::Budget, why);
+                }
+            }
             if search.stopped() && full.as_ref().is_none_or(Search::stopped) {
                 break;
             }

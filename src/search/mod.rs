@@ -12,7 +12,8 @@
 //!   wastes at most one block of quantization; once it fires, the caller
 //!   extracts no more batches;
 //! - [`rank`]: top-n images with scores comparable across stop points;
-//! - [`trace`]: on request, the vote race as plain data (bounded).
+//! - [`trace`]: on request, the vote race as plain data (bounded);
+//! - [`budget`]: a request's time budget, whether one more tile fits in it.
 //!
 //! [`shard`] runs the same search over a map split into shards by image.
 //!
@@ -20,6 +21,7 @@
 //! on one batch whose size is known up front. Pure Rust over plain arrays: no
 //! OpenCV, no HTTP.
 
+pub mod budget;
 pub mod permute;
 pub mod prior;
 pub mod rank;
@@ -66,6 +68,10 @@ pub struct SearchOptions {
     pub min_distinct: f32,
     /// Give up (returning the answer so far) once this instant passes.
     pub deadline: Option<Instant>,
+    /// Streamed queries: extract a next tile only when it is expected to
+    /// end within this time from the start of decoding (the first tile
+    /// always; [`budget`]). `None`: no budget.
+    pub budget: Option<Duration>,
     /// A prior over map images (a sequence's prediction, a pose
     /// restriction): the rule `posterior` reads it, a prior that excludes
     /// images keeps them out of the candidates, and the outcome carries the
@@ -97,6 +103,7 @@ impl Default for SearchOptions {
             min_score: 0.0,
             min_distinct: 0.0,
             deadline: None,
+            budget: None,
             prior: None,
             hamming: Some(HammingWeights::DEFAULT),
             place_window: Self::PLACE_WINDOW,
@@ -187,6 +194,18 @@ pub enum StopKind {
     Exhausted,
     /// The deadline passed.
     Deadline,
+    /// The next tile would not have ended within the request's time budget.
+    Budget,
+}
+
+impl StopKind {
+    /// Every kind, in the order the answers' documents list them.
+    pub const ALL: [StopKind; 4] = [
+        StopKind::Rule,
+        StopKind::Exhausted,
+        StopKind::Deadline,
+        StopKind::Budget,
+    ];
 }
 
 /// Where and why the search stopped.
@@ -312,6 +331,12 @@ impl<'m> Search<'m> {
     /// Whether the search has stopped (rule or deadline): feed no more.
     pub fn stopped(&self) -> bool {
         self.stop.is_some()
+    }
+
+    /// End the search from outside (between batches: the time budget),
+    /// unless it has stopped already.
+    pub fn end(&mut self, kind: StopKind, detail: String) {
+        self.stop.get_or_insert((kind, detail));
     }
 
     /// The query has exactly `n` features in all (every batch is known).

@@ -246,6 +246,11 @@ pub struct SearchDefaults {
     /// Images on each side, along the map's order, that count as one place
     /// when a candidate's distinctness is measured (0: each image alone).
     pub place_window: u32,
+    /// A time budget in milliseconds from the start of decoding: a streamed
+    /// query's next tile is extracted only when it is expected to end within
+    /// it (the first tile always). Absent: none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub budget_ms: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -334,6 +339,7 @@ impl Default for SearchDefaults {
             tile_order: o.tile_order,
             hamming: o.hamming.is_some(),
             place_window: o.place_window,
+            budget_ms: None,
         }
     }
 }
@@ -562,6 +568,9 @@ impl Config {
         }
         if let Err(e) = SearchOptions::check_place_window(s.place_window) {
             return bad("search.place_window", e);
+        }
+        if let Some(Err(e)) = s.budget_ms.map(crate::search::budget::check_ms) {
+            return bad("search.budget_ms", e);
         }
         if self.server.opencv_threads == 0 {
             return bad("server.opencv_threads", "must be at least 1".into());
@@ -878,6 +887,8 @@ mod tests {
             ("[search]\ntop_n = 101\n", "search.top_n"),
             ("[search]\nblock = 0\n", "search.block"),
             ("[search]\nplace_window = 1001\n", "search.place_window"),
+            ("[search]\nbudget_ms = 0\n", "search.budget_ms"),
+            ("[search]\nbudget_ms = -5\n", "search.budget_ms"),
             ("[limits]\ndeadline_ms = 0\n", "limits.deadline_ms"),
             ("[server]\nmax_connections = 0\n", "server.max_connections"),
             (

@@ -238,7 +238,7 @@ fn zero_counters() {
         counter!(CONNECTION_ERRORS, "kind" => kind).absolute(0);
     }
     use crate::search::StopKind;
-    for kind in [StopKind::Rule, StopKind::Exhausted, StopKind::Deadline] {
+    for kind in StopKind::ALL {
         counter!(STOPS, "kind" => super::proto::stop_kind_name(kind)).absolute(0);
     }
     for verified in ["true", "false"] {

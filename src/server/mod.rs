@@ -102,6 +102,10 @@ impl AppState {
                 min_score: s.min_score,
                 min_distinct: s.min_distinct,
                 deadline: None,
+                // checked with the configuration
+                budget: s
+                    .budget_ms
+                    .and_then(|ms| crate::search::budget::check_ms(ms).ok()),
                 prior: None,
                 hamming: s.hamming.then_some(crate::search::HammingWeights::DEFAULT),
                 place_window: s.place_window,

@@ -180,6 +180,7 @@ mod tests {
             (StopKind::Rule, "rule"),
             (StopKind::Exhausted, "exhausted"),
             (StopKind::Deadline, "deadline"),
+            (StopKind::Budget, "budget"),
         ] {
             assert_eq!(stop_kind_name(kind), name);
         }

@@ -53,3 +53,18 @@ pub fn real_map(name: &str, words: usize) -> RealMap {
         queries,
     }
 }
+
+impl RealMap {
+    /// A localizer over this vocabulary and map, as the service opens them
+    /// (both saved to files first; `verify` is the localizer's default for
+    /// geometric verification). The files may go once opened: the map is
+    /// mapped or read whole.
+    #[allow(dead_code)]
+    pub fn localizer(&self, verify: bool) -> bowloc::pipeline::Localizer {
+        let dir = tempfile::tempdir().unwrap();
+        let (vpath, mpath) = (dir.path().join("v.bowvoc"), dir.path().join("m.bowmap"));
+        self.vocab.save(&vpath).unwrap();
+        self.map.save(&mpath).unwrap();
+        bowloc::pipeline::Localizer::open(&vpath, &mpath, verify).unwrap()
+    }
+}

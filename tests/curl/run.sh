@@ -172,6 +172,12 @@ check "same seed and grid give the same candidates" test \
 status=$(req "$B" -F "image=@$IMG" "$BASE/localize?top_n=3&seed=7&tiles=$grid")
 check "multipart upload gives the same answer" test \
   "$status/$(jq -c '[.candidates[].id]' "$B")" = "200/$(jq -c '[.candidates[].id]' "$TMP/first.json")"
+# a time budget no tile fits in: the first tile, and the answer of its votes
+status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" \
+  "$BASE/localize?top_n=3&seed=7&tiles=2x2%2B24&budget_ms=0.001")
+check "budget_ms ends the search after its first tile, with an answer" test \
+  "$status/$(jq -r '[.stop.kind, .tiles.extracted, .tiles.total, (.candidates | length > 0)] | join(",")' "$B")" \
+  = "200/budget,1,4,true"
 status=$(req "$B" -H 'Content-Type: application/octet-stream' --data-binary @"$IMG" "$BASE/localize")
 check "application/octet-stream is accepted" test "$status" = 200
 s1=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize"; jq -r .seed "$B")
@@ -304,6 +310,8 @@ expect "form-urlencoded (curl's default)" 415 unsupported_media_type --data-bina
 expect "multipart without an image field" 400 missing_image_field -F "photo=@$IMG" "$BASE/localize"
 expect "unknown rule" 400 unknown_rule "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=fastest"
 expect "top_n=0" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?top_n=0"
+expect "budget_ms=0" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?budget_ms=0"
+expect "budget_ms=-1" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?budget_ms=-1"
 expect "top_n huge" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?top_n=99999999999999999999"
 expect "threshold=NaN" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=peak-mean&threshold=NaN"
 expect "threshold=-1" 400 invalid_parameter "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?rule=peak-mean&threshold=-1"
@@ -475,7 +483,7 @@ check "the old name ..._features_used_fraction is gone" sh -c "! grep -q 'featur
 for series in 'bowloc_rejected_requests_total{reason="deadline_exceeded"}' \
   'bowloc_http_errors_total{status="408",code="body_timeout"}' \
   'bowloc_http_connection_errors_total{kind="malformed_request"}' \
-  'bowloc_localize_stops_total{kind="deadline"}'; do
+  'bowloc_localize_stops_total{kind="deadline"}' 'bowloc_localize_stops_total{kind="budget"}'; do
   check "labelled counter exported before it moves: $series" grep -qF "$series " "$TMP/metrics.txt"
 done
 for name in process_resident_memory_bytes process_open_fds process_cpu_seconds_total; do

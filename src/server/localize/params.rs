@@ -76,6 +76,15 @@ pub struct LocalizeParams {
     /// taken) or `random` (drawn from the seed). Default: the configured order.
     #[param(value_type = Option<String>, example = "richest")]
     pub tile_order: Option<String>,
+    /// A time budget in milliseconds from the start of decoding (queueing
+    /// and the network not counted): a streamed query's next tile is
+    /// extracted only when it is expected to end within it, so the answer
+    /// comes at about that time at the latest, with stop kind `budget` when
+    /// the budget cut it short (the first tile is always extracted; a query
+    /// extracted whole is never cut). Default: the configured
+    /// `search.budget_ms`, else none.
+    #[param(value_type = Option<f64>, exclusive_minimum = 0, maximum = 600000, example = 30)]
+    pub budget_ms: Option<String>,
     /// Verify the top vote candidates geometrically and re-rank them by
     /// inliers (`true` or `false`; default from the `[verify]` section).
     /// With verification the score is an inlier count: by default the
@@ -197,6 +206,11 @@ impl LocalizeParams {
         if let Some(v) = &self.min_distinct {
             o.min_distinct = SearchOptions::check_min_distinct(number("min_distinct", v)?)
                 .map_err(|e| ApiError::invalid_parameter("min_distinct", e))?;
+        }
+        if let Some(v) = &self.budget_ms {
+            let budget = crate::search::budget::check_ms(number("budget_ms", v)?)
+                .map_err(|e| ApiError::invalid_parameter("budget_ms", e))?;
+            o.budget = Some(budget);
         }
         Ok(o)
     }
@@ -480,9 +494,12 @@ mod tests {
 
     #[test]
     fn parameters_are_taken() {
-        let o = parse("top_n=3&rule=hoeffding&delta=0.1&seed=42&min_score=0.2&min_distinct=0.6")
-            .unwrap();
+        let o = parse(
+            "top_n=3&rule=hoeffding&delta=0.1&seed=42&min_score=0.2&min_distinct=0.6&budget_ms=2.5",
+        )
+        .unwrap();
         assert_eq!(o.min_distinct, 0.6);
+        assert_eq!(o.budget, Some(std::time::Duration::from_micros(2500)));
         assert_eq!(o.top_n, 3);
         assert_eq!(o.rule, RuleSpec::new("hoeffding", Some(0.1)).unwrap());
         assert_eq!(o.seed, 42);
@@ -532,6 +549,10 @@ mod tests {
             ("min_distinct=1.5", "invalid_parameter", "min_distinct"),
             ("min_distinct=-0.1", "invalid_parameter", "min_distinct"),
             ("min_distinct=NaN", "invalid_parameter", "min_distinct"),
+            ("budget_ms=0", "invalid_parameter", "budget_ms"),
+            ("budget_ms=-3", "invalid_parameter", "budget_ms"),
+            ("budget_ms=abc", "invalid_parameter", "budget_ms"),
+            ("budget_ms=600001", "invalid_parameter", "budget_ms"),
             (
                 "min_features=2147483648",
                 "invalid_parameter",
