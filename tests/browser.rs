@@ -369,6 +369,23 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
         "{fetched}"
     );
 
+    // a time budget no tile fits in: the search ends after its first tile
+    // and the summary says why (`fixed 1` alone would read every tile)
+    js(
+        &client,
+        "document.getElementById('rule').value = 'fixed'; \
+         document.getElementById('threshold').value = '1'; \
+         document.getElementById('budget_ms').value = '0.001'; return null",
+    )
+    .await;
+    click(&client, "submit").await;
+    wait_until("the budget's stop", Duration::from_secs(30), || async {
+        text(&client, "race-summary")
+            .await
+            .contains("time budget 0.0 ms")
+    })
+    .await;
+
     client.close().await.unwrap();
     let _ = stop.send(());
     server.await.unwrap().unwrap();

@@ -171,6 +171,8 @@ function queryString() {
   if (n) q.set("top_n", n);
   const seed = $("seed").value.trim();
   if (seed) q.set("seed", seed);
+  const budget = $("budget_ms").value.trim();
+  if (budget) q.set("budget_ms", budget);
   q.set("verify", $("verify").checked ? "true" : "false");
   q.set("trace", $("full").checked ? "full" : "true");
   return q.toString();
