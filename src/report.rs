@@ -309,7 +309,9 @@ pub struct FeatureUse {
     /// (`tiles.extracted == tiles.total`), else estimated from the tiles
     /// extracted (their features over their share of the image), rounded.
     pub total: usize,
-    /// Features extracted (from the tiles extracted).
+    /// Features extracted (from the tiles extracted; after a coarse pass
+    /// that did not end the search, the tiles', as the search started over
+    /// on them).
     pub extracted: usize,
     /// Features quantized and voted before the search stopped.
     pub used: usize,

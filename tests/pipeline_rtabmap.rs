@@ -394,6 +394,17 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
         assert_eq!(ids(&fits), ids(&all), "{}", q.name);
         assert!(cut.features.used < all.features.used, "{}", q.name);
 
+        // after a coarse pass the budget answers from the pass's votes
+        // (the search would otherwise start over on the tiles)
+        let coarse: TileGrid = "2x2+24,coarse".parse().unwrap();
+        let probed = localizer
+            .localize_file(&q.path, &tight, Some(coarse))
+            .unwrap();
+        assert_eq!(probed.stop.kind, StopKind::Budget, "{}", q.name);
+        assert_eq!((probed.tiles.extracted, probed.tiles.total), (1, 5));
+        assert!(probed.features.used > 0, "{}", q.name);
+        assert!(!probed.candidates.is_empty(), "{}", q.name);
+
         let whole = localizer
             .localize_file(&q.path, &tight, Some(TileGrid::WHOLE))
             .unwrap();
@@ -402,9 +413,9 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
     }
 }
 
-/// Every streaming plan finds (almost) the keypoints of the whole image: the
-/// tiles' margins and the coarse pass's octave split lose or duplicate at
-/// most a few percent, and a coarse pass comes first and finds a good share.
+/// Every streaming plan's tiles find (almost) the keypoints of the whole
+/// image: their margins lose or duplicate at most a few percent; a coarse
+/// pass comes first, and finds a good share of them on its own.
 #[test]
 fn streaming_plans_find_the_whole_images_keypoints() {
     use bowloc::features::{GrayImage, TileGrid, decode_file};
@@ -423,7 +434,9 @@ fn streaming_plans_find_the_whole_images_keypoints() {
         for plan in ["2x2+24", "1x1+0,coarse", "2x2+24,coarse"] {
             let grid: TileGrid = plan.parse().unwrap();
             let (f, units) = extract_tiled(&image, &config, grid).unwrap();
-            let ratio = f.len() as f64 / whole.len() as f64;
+            // the tiles after a coarse pass hold every scale
+            let probe = if grid.coarse { units[0].features } else { 0 };
+            let ratio = (f.len() - probe) as f64 / whole.len() as f64;
             assert!(
                 (0.95..=1.05).contains(&ratio),
                 "{plan} on {}: {ratio:.3}",
@@ -432,7 +445,7 @@ fn streaming_plans_find_the_whole_images_keypoints() {
             assert_eq!(units.len(), grid.count(), "{plan}");
             assert_eq!(f.keypoints.len(), f.descriptors.nrows());
             if grid.coarse {
-                let share = units[0].features as f64 / f.len() as f64;
+                let share = probe as f64 / whole.len() as f64;
                 assert!(
                     (0.15..0.85).contains(&share),
                     "{plan}: coarse share {share:.3}"

@@ -33,8 +33,9 @@ use std::path::{Path, PathBuf};
 
 const MAGIC: [u8; 8] = *b"BOWLOCDE";
 /// 2: keypoints beside the descriptors; 3: tiles and their times; 4: the
-/// times are thread CPU time; 5: each tile's corner count; 6: its cell.
-const VERSION: u32 = 6;
+/// times are thread CPU time; 5: each tile's corner count; 6: its cell;
+/// 7: the tiles after a coarse pass keep every scale.
+const VERSION: u32 = 7;
 /// Descriptor width (SIFT).
 const DIM: usize = 128;
 /// Values per keypoint row: x, y, size, angle, response.

@@ -454,10 +454,11 @@ fn log_coarse_share(with_coarse: &cache::DescriptorSet) {
         .tiles
         .iter()
         .fold((0u64, 0u64), |(c, a), t| {
+            // the tiles after the pass hold every scale: the whole image's
             let first = t.first().map_or(0, |t| t.features as u64);
             (
                 c + first,
-                a + t.iter().map(|t| t.features as u64).sum::<u64>(),
+                a + t.iter().skip(1).map(|t| t.features as u64).sum::<u64>(),
             )
         });
     tracing::info!(

@@ -222,7 +222,7 @@ fn pass(
             open.push(0);
             continue;
         };
-        let n = query.words.len().max(1) as f64;
+        let n = query.feature_count().max(1) as f64;
         p.features += replay.outcome.features_used as f64 / n;
         p.tiles += replay.tiles as f64 / query.tiles.len().max(1) as f64;
         p.frames += 1;

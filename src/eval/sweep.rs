@@ -313,7 +313,7 @@ pub fn search_query(
     Outcome {
         candidates: r.outcome.candidates,
         used: r.outcome.features_used as u32,
-        total: query.words.len() as u32,
+        total: query.feature_count() as u32,
         stop: r.outcome.stop.kind,
         vote_ms: r.outcome.timings.vote.as_secs_f32() * 1e3,
         extract_ms: r.extract_ms as f32,
@@ -482,7 +482,7 @@ pub fn calibrate(
         memo.lock().expect("not poisoned").insert(p.to_bits(), v);
         v
     };
-    let lengths: Vec<usize> = queries.iter().map(|q| q.words.len()).collect();
+    let lengths: Vec<usize> = queries.iter().map(|q| q.feature_count()).collect();
     let median = median_features(&lengths);
     let mut out = Vec::with_capacity(targets.len());
     for &target in targets {

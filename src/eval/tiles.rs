@@ -147,6 +147,16 @@ impl Query {
             .collect()
     }
 
+    /// The query's features N, as the search counts them: those of its
+    /// tiles, without a coarse pass's (a search the pass does not end
+    /// starts over on the tiles, which hold every scale).
+    pub fn feature_count(&self) -> usize {
+        match (self.coarse_first, &self.tiles[..]) {
+            (true, [probe, _, ..]) => self.words.len() - probe.features as usize,
+            _ => self.words.len(),
+        }
+    }
+
     /// All its features, in grid order.
     pub fn features(&self) -> search::KnownFeatures<'_> {
         search::KnownFeatures {

@@ -8,12 +8,11 @@
 //! other is tried again on one request in [`CoarseChoice::EXPLORE_EVERY`], so
 //! a change of queries is noticed. The coarse pass is preferred only while
 //! most of its requests end on it ([`CoarseChoice::MIN_ENDED_ON_COARSE`]):
-//! then the verified stop on the coarse pass decides most answers, and the
-//! finest-scale tiles after it, whose vote statistics are biased (they are
-//! not a sample of the image), decide few. On gardens-point, where few
-//! searches end on the coarse pass, the coarse plan lost up to 2.8 points of
-//! recall@1 in the eval; on rtabmap-loop, where most do, none
-//! (docs/performance.md, "The learned plan, verified on the coarse pass"). A request's time is its extraction,
+//! a pass that seldom ends a search is paid for nothing by most requests,
+//! which then start over on the tiles (when the tiles after it kept only the
+//! finest scale and the search went on from the pass's votes, the coarse
+//! plan lost up to 2.8 points of recall@1 on gardens-point; docs/performance.md,
+//! "The learned plan, verified on the coarse pass"). A request's time is its extraction,
 //! quantization, voting and verification (decoding is the same either way);
 //! the typical time is the geometric mean, not the arithmetic one: the coarse
 //! plan's times are bimodal (most requests end after the coarse pass, the

@@ -90,7 +90,7 @@ impl Frame {
 
     /// Detect and describe inside `region` (x, y, width, height, clipped to
     /// the frame), keeping only keypoints whose centre lies in `core` (frame
-    /// coordinates, half-open) and whose scale `scales` admits. Keypoints come
+    /// coordinates, half-open). Keypoints come
     /// back in frame coordinates, strongest first, at most `cap` of them
     /// (0 = all).
     pub fn detect(
@@ -98,7 +98,6 @@ impl Frame {
         region: (u32, u32, u32, u32),
         core: (u32, u32, u32, u32),
         cap: usize,
-        scales: Scales,
     ) -> Result<Features, FeatureError> {
         let (fw, fh) = self.size();
         let x0 = region.0.min(fw);
@@ -131,7 +130,7 @@ impl Frame {
                 response: k.response(),
             };
             let inside = kp.x >= cx0 && kp.x < cx1 && kp.y >= cy0 && kp.y < cy1;
-            (inside && scales.admits(k)).then_some(kp)
+            inside.then_some(kp)
         };
         let input = roi.as_ref().unwrap_or(&self.mat);
         describe(&mut self.sift, input, place, cap, self.rootsift)
@@ -167,25 +166,6 @@ impl Frame {
             })
         };
         describe(&mut self.sift, &half, place, cap, self.rootsift)
-    }
-}
-
-/// Which of SIFT's scales a detection keeps.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Scales {
-    All,
-    /// Only the first octave's keypoints (found on the frame upsampled
-    /// twice): what a coarse pass at half size does not find.
-    Finest,
-}
-
-impl Scales {
-    fn admits(self, k: &KeyPoint) -> bool {
-        match self {
-            Scales::All => true,
-            // OpenCV packs the octave in the low byte, signed: -1 is 0xff.
-            Scales::Finest => (k.octave() & 0xff) as u8 as i8 == -1,
-        }
     }
 }
 
@@ -238,7 +218,7 @@ pub fn extract(image: &GrayImage, config: &ExtractConfig) -> Result<Features, Fe
     let mut frame = Frame::new(image, config)?;
     let (w, h) = frame.size();
     let all = (0, 0, w, h);
-    frame.detect(all, all, config.sift.max_features as usize, Scales::All)
+    frame.detect(all, all, config.sift.max_features as usize)
 }
 
 /// Decode a file and extract its features.

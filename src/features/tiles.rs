@@ -6,11 +6,13 @@
 //!
 //! A grid may also be *coarse first*: before any tile, the whole frame is
 //! extracted at half size (about a quarter of the cost), which finds the
-//! keypoints of the coarser scales; the tiles that follow keep only the
-//! finest scale's keypoints (SIFT's first octave, the one found on the
-//! upsampled frame), so again every keypoint is found once.
+//! keypoints of the coarser scales, a probe that may end the search when
+//! its answer verifies. When it does not, the tiles that follow are the
+//! plain grid's, every scale, and the search starts over on them
+//! ([`crate::search::Search::start_over`]): an answer not taken on the
+//! coarse pass is the tiles alone's.
 
-use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage, Scales};
+use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage};
 use crate::search::permute::{self, TileGuide, TileOrder};
 use serde::{Deserialize, Serialize};
 
@@ -23,8 +25,9 @@ pub struct TileGrid {
     pub rows: u32,
     /// Pixels of context around each tile's core, in the extraction frame.
     pub margin: u32,
-    /// Extract the whole frame at half size before the tiles, which then keep
-    /// only their finest-scale keypoints.
+    /// Extract the whole frame at half size before the tiles: a probe that
+    /// only the verified stop may end; when it does not, the search starts
+    /// over on the tiles (every scale).
     #[serde(default)]
     pub coarse: bool,
 }
@@ -264,16 +267,13 @@ impl Tiles {
         let cores = grid.cores(w, h);
         let n = cores.len() + usize::from(grid.coarse);
         let all = (w as f64 * h as f64).max(1.0);
-        let fine = if grid.coarse {
-            1.0 - TileGrid::COARSE_SHARE
-        } else {
-            1.0
-        };
+        // the coarse pass's expected share of the image's keypoints, then
+        // the tiles' among themselves: the search starts over on them
         let area: Vec<f64> = grid
             .coarse
             .then_some(TileGrid::COARSE_SHARE)
             .into_iter()
-            .chain(cores.iter().map(|c| fine * c.2 as f64 * c.3 as f64 / all))
+            .chain(cores.iter().map(|c| c.2 as f64 * c.3 as f64 / all))
             .collect();
         let corners = match order {
             Some((o, _)) if o.counts_corners() && cores.len() > 1 => {
@@ -348,10 +348,23 @@ impl Tiles {
 
     /// The share of the image's keypoints extracted so far, as expected
     /// before they are counted: each tile's share of the frame's area, or of
-    /// its corners when the tiles are ordered by them (of what the coarse
-    /// pass leaves, [`TileGrid::COARSE_SHARE`], after one).
+    /// its corners when the tiles are ordered by them. After a coarse pass
+    /// (expected to hold [`TileGrid::COARSE_SHARE`]) the tiles count alone,
+    /// as the search that starts over on them does.
     pub fn share_extracted(&self) -> f64 {
-        self.shares[..self.next].iter().sum()
+        let coarse = usize::from(self.order.first() == Some(&Unit::Coarse));
+        match self.next {
+            0 => 0.0,
+            n if n <= coarse => self.shares[0],
+            n => self.shares[coarse..n].iter().sum(),
+        }
+    }
+
+    /// The expected share of the unit extracted last ([`Tiles::share_extracted`]
+    /// counts the tiles after a coarse pass among themselves; this is each
+    /// unit's own, the coarse pass's among the image's keypoints).
+    pub fn share_of_last(&self) -> f64 {
+        self.next.checked_sub(1).map_or(0.0, |k| self.shares[k])
     }
 
     /// Extract the next unit: its features in frame coordinates.
@@ -370,22 +383,20 @@ impl Tiles {
                     core.2 + m + core.0.min(m),
                     core.3 + m + core.1.min(m),
                 );
-                let scales = match self.order[0] {
-                    Unit::Coarse => Scales::Finest,
-                    Unit::Tile(_) => Scales::All,
-                };
-                self.frame.detect(region, core, cap, scales)
+                self.frame.detect(region, core, cap)
             }
         })
     }
 
-    /// The cap of the k-th unit extracted: the image's cap split evenly, the
-    /// remainder to the first units, so the units' caps add up to the image's.
+    /// The cap of the k-th unit extracted: a coarse pass, the image's whole;
+    /// the tiles, the image's cap split evenly, the remainder to the first
+    /// ones, so the tiles' caps add up to the image's (as without the pass).
     fn tile_cap(&self, k: usize) -> usize {
-        if self.cap == 0 {
-            return 0;
+        let coarse = usize::from(self.order.first() == Some(&Unit::Coarse));
+        if self.cap == 0 || k < coarse {
+            return self.cap;
         }
-        let n = self.total();
+        let (n, k) = (self.cores.len(), k - coarse);
         (self.cap / n + usize::from(k < self.cap % n)).max(1)
     }
 }

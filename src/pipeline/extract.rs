@@ -52,16 +52,14 @@ pub fn extract_tiled(
     let coarse = usize::from(grid.coarse);
     let mut parts = Vec::with_capacity(tiles.total());
     let mut costs = Vec::with_capacity(tiles.total());
-    let mut area = 0.0;
     loop {
         let started = ThreadTime::now();
         let Some(tile) = tiles.next_tile() else { break };
         let tile = tile?;
-        let share = tiles.share_extracted();
         let unit = costs.len();
         costs.push(TileCost {
             features: tile.len(),
-            area: share - area,
+            area: tiles.share_of_last(),
             extract: started.elapsed(),
             corners: unit
                 .checked_sub(coarse)
@@ -72,7 +70,6 @@ pub fn extract_tiled(
                 .and_then(|t| cells.get(t).copied())
                 .unwrap_or_default(),
         });
-        area = share;
         parts.push(tile);
     }
     let refs: Vec<&Features> = parts.iter().collect();

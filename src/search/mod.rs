@@ -285,9 +285,14 @@ pub struct Search<'m> {
     coarse_batch: bool,
     batches: u64,
     fed: usize,
+    /// Features fed before the search started over ([`Search::start_over`]):
+    /// the number of this search's first feature.
+    numbered_from: usize,
     /// Every feature voted, in voting order.
     voted: Vec<Voted>,
     trace: Option<Trace>,
+    /// (every, max_points) the trace was asked with.
+    trace_asked: Option<(u32, usize)>,
 }
 
 impl<'m> Search<'m> {
@@ -314,8 +319,26 @@ impl<'m> Search<'m> {
             coarse_batch: false,
             batches: 0,
             fed: 0,
+            numbered_from: 0,
             voted: Vec::new(),
             trace: None,
+            trace_asked: None,
+        }
+    }
+
+    /// The search begun again from nothing, as if no feature had been fed:
+    /// what a coarse pass that did not end the search leaves (the tiles
+    /// after it are searched as they would be without it, so the answer
+    /// does not depend on the coarse pass's keypoints). The time spent so far
+    /// is kept, and feature numbers go on from the features fed (a caller's
+    /// keypoint list stays valid); the trace starts again.
+    pub fn start_over(self, map: &'m dyn MapRead) -> Self {
+        let mut fresh = Search::new(map, &self.options);
+        fresh.timings = self.timings;
+        fresh.numbered_from = self.numbered_from + self.fed;
+        match self.trace_asked {
+            Some((every, max_points)) => fresh.trace(every, max_points),
+            None => fresh,
         }
     }
 
@@ -325,6 +348,7 @@ impl<'m> Search<'m> {
         let mut trace = Trace::new(every, max_points);
         trace.warm_up = self.options.min_features.min(u32::MAX as usize) as u32;
         self.trace = Some(trace);
+        self.trace_asked = Some((every, max_points));
         self
     }
 
@@ -384,7 +408,7 @@ impl<'m> Search<'m> {
             return true;
         }
         let order = permute::permutation(count, batch_seed(self.options.seed, self.batches));
-        let offset = self.fed as u32;
+        let offset = (self.numbered_from + self.fed) as u32;
         self.batches += 1;
         self.fed += count;
         if let Some(trace) = &mut self.trace {
@@ -652,9 +676,11 @@ fn tile_finished(why: String) -> String {
 /// Stream an image's tiles through a search, tiles given as their features
 /// (known in advance) in extraction order with the image share each one
 /// covers, the first a coarse pass when `coarse_first`: what the service
-/// does with real tiles (used by evaluation).
-/// Returns the outcome, the (feature number, word) pairs voted and the tiles
-/// extracted.
+/// does with real tiles (used by evaluation). A coarse pass that does not
+/// end the search is left behind: the search starts over on the tiles
+/// ([`Search::start_over`]), whose shares then count among the tiles alone.
+/// Returns the outcome, the (feature number, word) pairs voted (numbered
+/// over every unit, the coarse pass's first) and the units extracted.
 pub fn search_tiles(
     map: &dyn MapRead,
     tiles: &[(KnownFeatures<'_>, f64)],
@@ -663,21 +689,32 @@ pub fn search_tiles(
     mut leader_check: Option<&mut dyn LeaderCheck>,
 ) -> (SearchOutcome, Vec<Voted>, usize) {
     let mut s = Search::new(map, options);
+    let probe = usize::from(coarse_first && tiles.len() > 1);
+    let fine: f64 = tiles[probe..].iter().map(|t| t.1).sum();
     let mut share = 0.0;
     let mut used = 0;
     for (k, (features, area)) in tiles.iter().enumerate() {
+        let coarse = k < probe;
         share += area;
         used += 1;
         let step = TileStep {
-            share,
+            share: if coarse {
+                share
+            } else {
+                share / fine.max(1e-12)
+            },
             last: k + 1 == tiles.len(),
-            coarse: coarse_first && k == 0,
+            coarse,
         };
         let check = leader_check
             .as_mut()
             .map(|c| &mut **c as &mut dyn LeaderCheck);
         if s.feed_tile(features.len(), step, features.lookup(), check) {
             break;
+        }
+        if coarse {
+            s = s.start_over(map);
+            share = 0.0;
         }
     }
     let voted = s.voted.clone();

@@ -445,3 +445,37 @@ fn a_stop_inside_a_tile_votes_the_rest_of_the_tile() {
     assert_eq!(coarse.stop.kind, StopKind::Rule);
     assert_eq!(coarse.stop.at_feature, 600);
 }
+
+/// A coarse pass that does not end the search is left behind: the search
+/// starts over on the tiles and answers exactly as it would on them alone,
+/// its feature numbers going on after the pass's.
+#[test]
+fn a_coarse_pass_that_does_not_stop_is_left_behind() {
+    let (map, lists) = random_map(40, 11);
+    let probe: Vec<u32> = (0..60).map(|i| (i * 7 % K) as u32).collect();
+    let tiles: Vec<Vec<u32>> = (0..4).map(|t| lists[3 + t].clone()).collect();
+    let o = opts("none", None, 5);
+    let alone: Vec<(KnownFeatures<'_>, f64)> = tiles
+        .iter()
+        .map(|w| (KnownFeatures::words(w), 0.25))
+        .collect();
+    let (plain, plain_voted, plain_used) = search_tiles(&map, &alone, &o, false, None);
+    let mut units = vec![(KnownFeatures::words(&probe), 0.3)];
+    units.extend(alone.iter().cloned());
+    let (probed, probed_voted, probed_used) = search_tiles(&map, &units, &o, true, None);
+    assert_eq!(probed_used, plain_used + 1);
+    assert_eq!(probed.features_used, plain.features_used);
+    assert_eq!(probed.features_total, plain.features_total);
+    let ids = |o: &SearchOutcome| {
+        o.candidates
+            .iter()
+            .map(|r| (r.id, r.score))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(ids(&probed), ids(&plain));
+    // the same words voted, numbered after the probe's 60 features
+    assert_eq!(probed_voted.len(), plain_voted.len());
+    for (p, q) in probed_voted.iter().zip(&plain_voted) {
+        assert_eq!((p.feature, p.word), (q.feature + 60, q.word));
+    }
+}
