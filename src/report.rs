@@ -7,7 +7,7 @@
 
 use crate::features::TileGrid;
 use crate::index::{ImageInfo, MapRead};
-use crate::search::{RuleSpec, SearchOutcome, StopInfo, Trace};
+use crate::search::{RuleSpec, SearchOutcome, StopInfo, StopKind, Trace};
 use serde::Serialize;
 use std::collections::HashMap;
 use std::time::Duration;
@@ -639,12 +639,13 @@ impl utoipa::PartialSchema for StopInfo {
                 .schema_type(Type::String)
                 .description(Some(description))
         };
+        let kinds = StopKind::ALL.map(|k| format!("`{}`: {}", k.name(), k.about()));
         ObjectBuilder::new()
             .description(Some("Where and why the search stopped."))
             .property(
                 "kind",
-                text("`rule`: the stopping rule fired; `exhausted`: every feature was used; `deadline`: the request's deadline passed (the answer so far); `budget`: the next tile would not have ended within the request's `budget_ms` (the answer so far).")
-                    .enum_values(Some(["rule", "exhausted", "deadline", "budget"])),
+                text(&format!("{}.", kinds.join("; ")))
+                    .enum_values(Some(StopKind::ALL.map(StopKind::name))),
             )
             .required("kind")
             .property(
@@ -666,7 +667,6 @@ impl ToSchema for StopInfo {}
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::search::StopKind;
     use utoipa::PartialSchema;
 
     #[test]

@@ -9,7 +9,7 @@
 //! keypoints of the coarser scales, a probe that may end the search when
 //! its answer verifies. When it does not, the tiles that follow are the
 //! plain grid's, every scale, and the search starts over on them
-//! ([`crate::search::Search::start_over`]): an answer not taken on the
+//! ([`crate::search::Search::feed_tile`]): an answer not taken on the
 //! coarse pass is the tiles alone's.
 
 use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage};
@@ -352,12 +352,17 @@ impl Tiles {
     /// (expected to hold [`TileGrid::COARSE_SHARE`]) the tiles count alone,
     /// as the search that starts over on them does.
     pub fn share_extracted(&self) -> f64 {
-        let coarse = usize::from(self.order.first() == Some(&Unit::Coarse));
+        let coarse = self.coarse_units();
         match self.next {
             0 => 0.0,
             n if n <= coarse => self.shares[0],
             n => self.shares[coarse..n].iter().sum(),
         }
+    }
+
+    /// 1 when a coarse pass comes first, else 0: the units before the tiles.
+    fn coarse_units(&self) -> usize {
+        usize::from(self.order.first() == Some(&Unit::Coarse))
     }
 
     /// The expected share of the unit extracted last ([`Tiles::share_extracted`]
@@ -392,7 +397,7 @@ impl Tiles {
     /// the tiles, the image's cap split evenly, the remainder to the first
     /// ones, so the tiles' caps add up to the image's (as without the pass).
     fn tile_cap(&self, k: usize) -> usize {
-        let coarse = usize::from(self.order.first() == Some(&Unit::Coarse));
+        let coarse = self.coarse_units();
         if self.cap == 0 || k < coarse {
             return self.cap;
         }

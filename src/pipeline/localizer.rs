@@ -293,6 +293,23 @@ impl Localizer {
         let mut keypoints: Vec<Keypoint> = Vec::new();
         let mut tiles_used = 0;
         loop {
+            // a budget ends a search only where a tile is left to skip (after
+            // a coarse pass, with the pass's votes: the next tile would start
+            // the search over)
+            if let Some(budget) = options
+                .budget
+                .filter(|_| !search.stopped() && tiles.extracted() < tiles.total())
+            {
+                let fits = search::budget::next_tile_fits(
+                    budget,
+                    started.elapsed(),
+                    decoded.elapsed(),
+                    tiles_used,
+                );
+                if let Err(why) = fits {
+                    search.end(search::StopKind::Budget, why);
+                }
+            }
             if search.stopped() && full.as_ref().is_none_or(Search::stopped) {
                 break;
             }
@@ -314,10 +331,6 @@ impl Localizer {
                 );
                 full.feed_tile(tile.len(), step, quantize, None);
             }
-            if step.coarse {
-                // the full search reads the tiles alone, as without the pass
-                full = full.map(|f| f.start_over(map));
-            }
             if search.stopped() {
                 continue;
             }
@@ -338,27 +351,6 @@ impl Localizer {
                 place_window: options.place_window,
             };
             search.feed_tile(tile.len(), step, quantize, Some(&mut check));
-            // a budget ends a search only where a tile is left to skip (and
-            // after a coarse pass, before the search would start over)
-            if let Some(budget) = options
-                .budget
-                .filter(|_| !search.stopped() && tiles.extracted() < tiles.total())
-            {
-                let fits = search::budget::next_tile_fits(
-                    budget,
-                    started.elapsed(),
-                    decoded.elapsed(),
-                    tiles_used,
-                );
-                if let Err(why) = fits {
-                    search.end(search::StopKind::Budget, why);
-                }
-            }
-            if step.coarse && !search.stopped() {
-                // the coarse pass did not end the search: it starts over
-                // on the tiles, whose answer is then the tiles alone's
-                search = search.start_over(map);
-            }
         }
         let extraction = Extraction {
             tiles_extracted: tiles_used,

@@ -206,6 +206,28 @@ impl StopKind {
         StopKind::Deadline,
         StopKind::Budget,
     ];
+
+    /// How answers spell it (its serialized name).
+    pub fn name(self) -> &'static str {
+        match self {
+            StopKind::Rule => "rule",
+            StopKind::Exhausted => "exhausted",
+            StopKind::Deadline => "deadline",
+            StopKind::Budget => "budget",
+        }
+    }
+
+    /// What it means, for the API documents.
+    pub fn about(self) -> &'static str {
+        match self {
+            StopKind::Rule => "the stopping rule fired",
+            StopKind::Exhausted => "every feature was used",
+            StopKind::Deadline => "the request's deadline passed (the answer so far)",
+            StopKind::Budget => {
+                "the next tile would not have ended within the request's `budget_ms` (the answer so far)"
+            }
+        }
+    }
 }
 
 /// Where and why the search stopped.
@@ -267,6 +289,7 @@ fn batch_seed(seed: u64, k: u64) -> u64 {
 /// A search in progress: feed it batches of features until it stops or the
 /// features run out, then [`finish`](Search::finish) it.
 pub struct Search<'m> {
+    map: &'m dyn MapRead,
     options: SearchOptions,
     voter: Voter<'m>,
     rule: Box<dyn StopRule>,
@@ -285,9 +308,12 @@ pub struct Search<'m> {
     coarse_batch: bool,
     batches: u64,
     fed: usize,
-    /// Features fed before the search started over ([`Search::start_over`]):
-    /// the number of this search's first feature.
+    /// Features fed before the search started over (after a coarse pass,
+    /// [`Search::feed_tile`]): the number of this search's first feature.
     numbered_from: usize,
+    /// The last batch was a coarse pass that did not end the search: the
+    /// next tile starts it over.
+    probed: bool,
     /// Every feature voted, in voting order.
     voted: Vec<Voted>,
     trace: Option<Trace>,
@@ -307,6 +333,7 @@ impl<'m> Search<'m> {
             voter = voter.with_hamming(map, weights);
         }
         Self {
+            map,
             options: options.clone(),
             voter,
             rule,
@@ -320,26 +347,25 @@ impl<'m> Search<'m> {
             batches: 0,
             fed: 0,
             numbered_from: 0,
+            probed: false,
             voted: Vec::new(),
             trace: None,
             trace_asked: None,
         }
     }
 
-    /// The search begun again from nothing, as if no feature had been fed:
-    /// what a coarse pass that did not end the search leaves (the tiles
-    /// after it are searched as they would be without it, so the answer
-    /// does not depend on the coarse pass's keypoints). The time spent so far
+    /// Begin again from nothing, as if no feature had been fed: what a
+    /// coarse pass that did not end the search leaves. The time spent so far
     /// is kept, and feature numbers go on from the features fed (a caller's
     /// keypoint list stays valid); the trace starts again.
-    pub fn start_over(self, map: &'m dyn MapRead) -> Self {
-        let mut fresh = Search::new(map, &self.options);
+    fn start_over(&mut self) {
+        let mut fresh = Search::new(self.map, &self.options);
         fresh.timings = self.timings;
         fresh.numbered_from = self.numbered_from + self.fed;
-        match self.trace_asked {
-            Some((every, max_points)) => fresh.trace(every, max_points),
-            None => fresh,
+        if let Some((every, max_points)) = self.trace_asked {
+            fresh = fresh.trace(every, max_points);
         }
+        *self = fresh;
     }
 
     /// Record the vote race: a point every `every` features, at most
@@ -495,7 +521,10 @@ impl<'m> Search<'m> {
     /// inside a tile of an image that comes in several, the tile's other
     /// features are voted before it ends. On a coarse pass
     /// (`step.coarse`) only the rule's geometric check may stop the search
-    /// ([`Progress::coarse`]).
+    /// ([`Progress::coarse`]); a pass that does not is left behind: the
+    /// next tile starts the search over, so its answer is the tiles alone's
+    /// (while no tile follows, as when a time budget ends the search there,
+    /// the answer is the pass's). `step.share` then counts the tiles alone.
     /// Returns whether the search has stopped.
     pub fn feed_tile(
         &mut self,
@@ -504,6 +533,9 @@ impl<'m> Search<'m> {
         quantize: impl FnMut(&[u32], &mut [u32], &mut [u64]),
         leader_check: Option<&mut dyn LeaderCheck>,
     ) -> bool {
+        if self.probed && !self.stopped() {
+            self.start_over();
+        }
         let fed = self.fed + count;
         self.streamed |= !step.last && self.options.finish_tile;
         if step.last {
@@ -513,6 +545,7 @@ impl<'m> Search<'m> {
         }
         self.coarse_batch = step.coarse && !step.last;
         let stopped = self.feed_checked(count, quantize, leader_check);
+        self.probed = self.coarse_batch && !stopped;
         self.coarse_batch = false;
         stopped
     }
@@ -677,8 +710,8 @@ fn tile_finished(why: String) -> String {
 /// (known in advance) in extraction order with the image share each one
 /// covers, the first a coarse pass when `coarse_first`: what the service
 /// does with real tiles (used by evaluation). A coarse pass that does not
-/// end the search is left behind: the search starts over on the tiles
-/// ([`Search::start_over`]), whose shares then count among the tiles alone.
+/// end the search is left behind ([`Search::feed_tile`]), the tiles' shares
+/// counted among themselves.
 /// Returns the outcome, the (feature number, word) pairs voted (numbered
 /// over every unit, the coarse pass's first) and the units extracted.
 pub fn search_tiles(
@@ -713,7 +746,6 @@ pub fn search_tiles(
             break;
         }
         if coarse {
-            s = s.start_over(map);
             share = 0.0;
         }
     }

@@ -433,17 +433,29 @@ fn a_stop_inside_a_tile_votes_the_rest_of_the_tile() {
     assert_eq!(unfinished.stop.kind, StopKind::Rule);
     assert!(unfinished.stop.at_feature < 100, "{:?}", unfinished.stop);
     // the same first tile as a coarse pass: the vote rule does not stop
-    // there, and fires on the next tile's first features
+    // there; the next tile starts the search over, and the rule fires in
+    // it as in a first tile, which is then voted to its end
     let mut coarse = Search::new(&map, &o);
     let first = TileStep {
         coarse: true,
         ..step(1.0 / 3.0, false)
     };
     assert!(!coarse.feed_tile(300, first, quantize_from(tiles[0]), None));
-    assert!(coarse.feed_tile(300, step(2.0 / 3.0, false), quantize_from(tiles[1]), None));
+    assert!(coarse.feed_tile(300, step(1.0 / 3.0, false), quantize_from(tiles[1]), None));
     let coarse = coarse.finish();
     assert_eq!(coarse.stop.kind, StopKind::Rule);
-    assert_eq!(coarse.stop.at_feature, 600);
+    assert_eq!(coarse.stop.at_feature, 300);
+    assert_eq!((coarse.features_used, coarse.features_total), (300, 300));
+    // ended after the pass (a time budget), the answer is the pass's
+    let mut probe = Search::new(&map, &o);
+    assert!(!probe.feed_tile(300, first, quantize_from(tiles[0]), None));
+    probe.end(StopKind::Budget, "budget".into());
+    let probe = probe.finish();
+    assert_eq!(
+        (probe.stop.kind, probe.features_used),
+        (StopKind::Budget, 300)
+    );
+    assert!(!probe.candidates.is_empty());
 }
 
 /// A coarse pass that does not end the search is left behind: the search

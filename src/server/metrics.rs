@@ -239,7 +239,7 @@ fn zero_counters() {
     }
     use crate::search::StopKind;
     for kind in StopKind::ALL {
-        counter!(STOPS, "kind" => super::proto::stop_kind_name(kind)).absolute(0);
+        counter!(STOPS, "kind" => kind.name()).absolute(0);
     }
     for verified in ["true", "false"] {
         counter!(VERIFIED, "verified" => verified).absolute(0);
@@ -321,7 +321,7 @@ pub fn localized(answer: &Localization) {
         let left = (tiles.total - tiles.extracted) as f64;
         histogram!(EXTRACTION_SAVED).record(t.extract / 1e3 * left / tiles.extracted as f64);
     }
-    counter!(STOPS, "kind" => super::proto::stop_kind_name(answer.stop.kind)).increment(1);
+    counter!(STOPS, "kind" => answer.stop.kind.name()).increment(1);
     if let Some(verified) = answer.verified {
         histogram!(VERIFY_DURATION).record(t.verify / 1e3);
         let top = answer.candidates.first().and_then(|c| c.inliers);

@@ -4,7 +4,7 @@
 //! [`report::Localization`](crate::report::Localization).
 
 use crate::report::{Candidate, Localization, RacePoint, RaceTrace, SequenceAnswer};
-use crate::search::{StopInfo, StopKind};
+use crate::search::StopInfo;
 
 /// Generated from `proto/localize.proto` (package `bowloc.v1`).
 pub mod pb {
@@ -13,15 +13,6 @@ pub mod pb {
 
 /// Media type of protobuf answers.
 pub const CONTENT_TYPE: &str = "application/x-protobuf";
-
-/// How a stop kind is spelled in answers (`rule`, `exhausted`, `deadline`):
-/// the JSON spelling, so both forms agree.
-pub fn stop_kind_name(kind: StopKind) -> String {
-    match serde_json::to_value(kind) {
-        Ok(serde_json::Value::String(s)) => s,
-        _ => format!("{kind:?}").to_lowercase(),
-    }
-}
 
 impl From<&Localization> for pb::Localization {
     fn from(a: &Localization) -> Self {
@@ -110,7 +101,7 @@ fn candidate(c: &Candidate) -> pb::Candidate {
 
 fn stop(s: &StopInfo) -> pb::Stop {
     pb::Stop {
-        kind: stop_kind_name(s.kind),
+        kind: s.kind.name().to_owned(),
         at_feature: s.at_feature as u64,
         detail: s.detail.clone(),
     }
@@ -172,17 +163,12 @@ pub fn encode(answer: &Localization) -> Vec<u8> {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use crate::search::StopKind;
 
     #[test]
     fn stop_kinds_are_spelled_as_in_json() {
-        for (kind, name) in [
-            (StopKind::Rule, "rule"),
-            (StopKind::Exhausted, "exhausted"),
-            (StopKind::Deadline, "deadline"),
-            (StopKind::Budget, "budget"),
-        ] {
-            assert_eq!(stop_kind_name(kind), name);
+        for kind in StopKind::ALL {
+            assert_eq!(serde_json::to_value(kind).unwrap(), kind.name());
         }
     }
 }
