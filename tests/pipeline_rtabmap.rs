@@ -338,8 +338,10 @@ fn cli_reports_bad_input_clearly() {
 }
 
 /// A time budget ends a streamed search at a tile end, after at least one
-/// tile, with the answer of the votes so far; a budget every tile fits in
-/// changes nothing, and a query extracted whole is never cut.
+/// tile, with the answer of the votes so far; after a coarse pass it asks
+/// room for two tiles; a budget every tile fits in changes nothing, and a
+/// query extracted whole is never cut. The tiles teach the localizer what a
+/// keypoint costs.
 #[test]
 fn a_time_budget_ends_the_search_at_a_tile_end() {
     use bowloc::features::TileGrid;
@@ -401,6 +403,11 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
             .localize_file(&q.path, &tight, Some(coarse))
             .unwrap();
         assert_eq!(probed.stop.kind, StopKind::Budget, "{}", q.name);
+        assert!(
+            probed.stop.detail.contains("the next 2 tiles would take"),
+            "{}",
+            probed.stop.detail
+        );
         assert_eq!((probed.tiles.extracted, probed.tiles.total), (1, 5));
         assert!(probed.features.used > 0, "{}", q.name);
         assert!(!probed.candidates.is_empty(), "{}", q.name);
@@ -411,6 +418,14 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
         assert_eq!(whole.stop.kind, StopKind::Exhausted, "{}", q.name);
         assert_eq!(whole.features.used, whole.features.total, "{}", q.name);
     }
+    // the searches that went through their tiles taught the localizer what
+    // a keypoint costs here: something, and less than a millisecond
+    let learnt = localizer.keypoint_cost();
+    assert_ne!(learnt, bowloc::search::budget::KeypointCost::PRIOR);
+    assert!(
+        learnt > Duration::ZERO && learnt < Duration::from_millis(1),
+        "{learnt:?}"
+    );
 }
 
 /// Every streaming plan's tiles find (almost) the keypoints of the whole

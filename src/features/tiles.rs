@@ -372,6 +372,12 @@ impl Tiles {
         self.next.checked_sub(1).map_or(0.0, |k| self.shares[k])
     }
 
+    /// The expected share of the image's keypoints in the unit extracted
+    /// next, as [`Tiles::share_of_last`] counts it (`None`: none is left).
+    pub fn share_of_next(&self) -> Option<f64> {
+        self.shares.get(self.next).copied()
+    }
+
     /// Extract the next unit: its features in frame coordinates.
     pub fn next_tile(&mut self) -> Option<Result<Features, FeatureError>> {
         let &unit = self.order.get(self.next)?;

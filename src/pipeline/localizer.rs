@@ -19,7 +19,7 @@ use crate::search::{self, Search, SearchOptions};
 use crate::vocabulary::Vocabulary;
 use anyhow::Context;
 use std::path::Path;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Most points of a traced vote race (the sampling step doubles beyond).
 pub const TRACE_POINTS: usize = 256;
@@ -57,6 +57,9 @@ pub struct Localizer {
     /// end turns it on.
     verify: VerifyParams,
     fit: OpenCvFit,
+    /// What a keypoint costs a tile, learnt from the requests served (what a
+    /// time budget prices the next tile with).
+    keypoint_cost: search::budget::KeypointCost,
 }
 
 impl Localizer {
@@ -95,6 +98,7 @@ impl Localizer {
             coarse_choice: None,
             fit: OpenCvFit::new(no_verify.fit()),
             verify: no_verify,
+            keypoint_cost: search::budget::KeypointCost::new(),
         }
     }
 
@@ -210,6 +214,37 @@ impl Localizer {
         }
     }
 
+    /// What a keypoint costs a tile, as learnt from the requests so far
+    /// ([`search::budget::KeypointCost`]).
+    pub fn keypoint_cost(&self) -> Duration {
+        self.keypoint_cost.per_keypoint()
+    }
+
+    /// What the search needs next, in tiles, and how long they are
+    /// expected to take ([`search::budget`]): after tiles, the next one,
+    /// priced by the keypoints it is expected to hold (the tiles' keypoints
+    /// so far shared out by their expected shares); after the coarse pass
+    /// alone, [`search::budget::TILES_AFTER_A_PASS`] tiles at what the pass
+    /// took each.
+    fn next_tiles_time(
+        &self,
+        tiles: &Tiles,
+        pass: Option<search::budget::UnitCost>,
+        costs: &[search::budget::UnitCost],
+    ) -> (Duration, u32) {
+        if costs.is_empty() {
+            let n = search::budget::TILES_AFTER_A_PASS;
+            return (pass.map_or(Duration::ZERO, |p| p.time * n), n);
+        }
+        let seen: usize = costs.iter().map(|c| c.keypoints).sum();
+        let next = match (tiles.share_extracted(), tiles.share_of_next()) {
+            (done, Some(next)) if done > 0.0 => seen as f64 * next / done,
+            _ => seen as f64 / costs.len() as f64,
+        };
+        let per_keypoint = self.keypoint_cost.per_keypoint();
+        (search::budget::next_tile_time(costs, next, per_keypoint), 1)
+    }
+
     /// Tell the learned coarse pass what `answer` cost, when its grid was
     /// the one [`Localizer::grid_for`] chose for `rule` without being
     /// `asked` for one.
@@ -292,21 +327,19 @@ impl Localizer {
         }
         let mut keypoints: Vec<Keypoint> = Vec::new();
         let mut tiles_used = 0;
+        // what the coarse pass and each tile after it cost
+        let (mut pass, mut costs) = (None, Vec::new());
         loop {
-            // a budget ends a search only where a tile is left to skip (after
-            // a coarse pass, with the pass's votes: the next tile would start
-            // the search over)
+            // a budget ends a search only where a tile is left to skip, and
+            // never before the first (after a coarse pass, with the pass's
+            // votes: the next tile would start the search over)
             if let Some(budget) = options
                 .budget
-                .filter(|_| !search.stopped() && tiles.extracted() < tiles.total())
+                .filter(|_| !search.stopped() && (1..tiles.total()).contains(&tiles.extracted()))
             {
-                let fits = search::budget::next_tile_fits(
-                    budget,
-                    started.elapsed(),
-                    decoded.elapsed(),
-                    tiles_used,
-                );
-                if let Err(why) = fits {
+                let (next, n) = self.next_tiles_time(&tiles, pass, &costs);
+                if let Err(why) = search::budget::next_tiles_fit(budget, started.elapsed(), next, n)
+                {
                     search.end(search::StopKind::Budget, why);
                 }
             }
@@ -350,8 +383,18 @@ impl Localizer {
                 keypoints: &keypoints,
                 place_window: options.place_window,
             };
+            let fed = Instant::now();
             search.feed_tile(tile.len(), step, quantize, Some(&mut check));
+            let cost = search::budget::UnitCost {
+                time: took + fed.elapsed(),
+                keypoints: tile.len(),
+            };
+            match step.coarse {
+                true => pass = Some(cost),
+                false => costs.push(cost),
+            }
         }
+        self.keypoint_cost.record(&costs);
         let extraction = Extraction {
             tiles_extracted: tiles_used,
             tiles_total: tiles.total(),

@@ -1,11 +1,22 @@
 //! A request's time budget: whether streaming extraction may extract one
 //! more tile. A caller that must have an answer within a time (a robot's
 //! control loop) gives the budget; after each tile the next one is taken
-//! only if it is expected to end within it, the tiles so far telling what
-//! a tile costs (its extraction, quantization and votes). The first tile is
-//! always taken, so every answer has votes behind it. Plain arithmetic on
-//! durations: the pipeline measures, this decides.
+//! only if it is expected to end within it. The first tile is always taken,
+//! so every answer has votes behind it. Plain arithmetic on durations: the
+//! pipeline measures, this decides.
+//!
+//! What a tile costs (its extraction, quantization, votes and checks) is a
+//! part that comes with its area, about the same for every tile of a grid,
+//! and a part per keypoint; tiles are extracted richest first, so the next
+//! one usually holds fewer keypoints than those before it, and their mean
+//! time overestimates it (by a median of 32.5 % on gardens-point,
+//! `examples/tile_cost.rs`). [`next_tile_time`] prices the next tile's
+//! expected keypoints instead, at what a keypoint costs on this machine,
+//! which [`KeypointCost`] learns from the requests served. After a coarse
+//! pass the search starts over on the tiles only when
+//! [`TILES_AFTER_A_PASS`] of them fit.
 
+use std::sync::Mutex;
 use std::time::Duration;
 
 /// The longest budget accepted: ten minutes, far past any deadline.
@@ -25,30 +36,140 @@ pub fn check_ms(ms: f64) -> Result<Duration, String> {
     }
 }
 
-/// `Ok` when one more tile fits in `budget`, else why it does not (the
-/// stop's detail). `spent`: the time since the request's work began
-/// (decoding included); `tiles_cost`: the part of it the `tiles_done` tiles
-/// took, whose mean is what the next tile is expected to take.
-pub fn next_tile_fits(
+/// What one extracted unit (a tile or the coarse pass) cost a request: the
+/// time from asking for it to its votes counted and checked, and the
+/// keypoints it gave.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UnitCost {
+    pub time: Duration,
+    pub keypoints: usize,
+}
+
+/// The expected time of the next tile, after the tiles `done` (at least
+/// one), when it is expected to hold `next_keypoints`: the tiles' mean time
+/// apart from their keypoints, plus `per_keypoint` for each of the next
+/// one's.
+pub fn next_tile_time(done: &[UnitCost], next_keypoints: f64, per_keypoint: Duration) -> Duration {
+    let n = done.len().max(1) as f64;
+    let q = per_keypoint.as_secs_f64();
+    let apart = done
+        .iter()
+        .map(|u| u.time.as_secs_f64() - q * u.keypoints as f64)
+        .sum::<f64>()
+        / n;
+    Duration::from_secs_f64(apart.max(0.0) + q * next_keypoints.max(0.0))
+}
+
+/// After a coarse pass that did not end the search, the search starts over
+/// on the tiles only when this many are expected to fit in the budget (each
+/// priced at what the pass took): one tile of four shows a quarter of the
+/// image, and a search that started over and was cut after one answered
+/// worse than the pass, which saw all of it at half size (rtabmap-loop,
+/// docs/service.md, "A time budget").
+pub const TILES_AFTER_A_PASS: u32 = 2;
+
+/// `Ok` when the next `tiles` tiles, expected to take `next` together, fit
+/// in `budget`, else why they do not (the stop's detail). `spent`: the time
+/// since the request's work began (decoding included).
+pub fn next_tiles_fit(
     budget: Duration,
     spent: Duration,
-    tiles_cost: Duration,
-    tiles_done: usize,
+    next: Duration,
+    tiles: u32,
 ) -> Result<(), String> {
-    if tiles_done == 0 {
-        return Ok(());
-    }
-    let next = tiles_cost / tiles_done as u32;
     if spent + next <= budget {
         return Ok(());
     }
     let ms = |d: Duration| d.as_secs_f64() * 1000.0;
+    let what = match tiles {
+        1 => "the next tile".to_string(),
+        n => format!("the next {n} tiles"),
+    };
     Err(format!(
-        "time budget {:.1} ms: {:.1} ms spent, the next tile would take about {:.1} ms",
+        "time budget {:.1} ms: {:.1} ms spent, {what} would take about {:.1} ms",
         ms(budget),
         ms(spent),
         ms(next)
     ))
+}
+
+/// What a keypoint costs a tile on this machine, learnt from the requests
+/// served: the slope of a tile's time against its keypoints among the tiles
+/// of one request (same grid, same image: they differ in little else),
+/// summed over the recent requests (each request's weight fades by
+/// [`KeypointCost::FADE`] with every one after it, so the figure follows
+/// the machine's speed), starting from [`KeypointCost::PRIOR`].
+pub struct KeypointCost {
+    sums: Mutex<Slope>,
+}
+
+/// Sums of a least-squares slope through the origin of centred values.
+#[derive(Debug, Clone, Copy)]
+struct Slope {
+    /// Σ (keypoints − mean) · (seconds − mean)
+    xy: f64,
+    /// Σ (keypoints − mean)²
+    xx: f64,
+}
+
+impl KeypointCost {
+    /// Before any request: 0.03 ms a keypoint (SIFT describes one in about
+    /// 0.024 ms on the 2-vCPU Xeon and EPYC machines of docs/performance.md,
+    /// "Where SIFT's time goes", and quantizing and voting it add a little).
+    pub const PRIOR: Duration = Duration::from_micros(30);
+    /// The prior weighs as much as this Σ (keypoints − mean)² of requests
+    /// (the spread of the tiles of a few queries).
+    const PRIOR_WEIGHT: f64 = 20_000.0;
+    /// Each request's share fades by this factor with every later one.
+    pub const FADE: f64 = 0.99;
+
+    pub fn new() -> Self {
+        let q = Self::PRIOR.as_secs_f64();
+        Self {
+            sums: Mutex::new(Slope {
+                xy: q * Self::PRIOR_WEIGHT,
+                xx: Self::PRIOR_WEIGHT,
+            }),
+        }
+    }
+
+    /// The current estimate (never negative).
+    pub fn per_keypoint(&self) -> Duration {
+        let s = *self.sums.lock().unwrap_or_else(|e| e.into_inner());
+        Duration::from_secs_f64((s.xy / s.xx).max(0.0))
+    }
+
+    /// Learn from the tiles of one request (a coarse pass left out: its
+    /// area is not a tile's); fewer than two tell nothing.
+    pub fn record(&self, tiles: &[UnitCost]) {
+        if tiles.len() < 2 {
+            return;
+        }
+        let n = tiles.len() as f64;
+        let mean_k = tiles.iter().map(|u| u.keypoints as f64).sum::<f64>() / n;
+        let mean_t = tiles.iter().map(|u| u.time.as_secs_f64()).sum::<f64>() / n;
+        let (mut xy, mut xx) = (0.0, 0.0);
+        for u in tiles {
+            let dk = u.keypoints as f64 - mean_k;
+            xy += dk * (u.time.as_secs_f64() - mean_t);
+            xx += dk * dk;
+        }
+        let mut s = self.sums.lock().unwrap_or_else(|e| e.into_inner());
+        // the prior fades too, but never below its own weight's share
+        s.xy = s.xy * Self::FADE + xy;
+        s.xx = s.xx * Self::FADE + xx;
+        if s.xx < Self::PRIOR_WEIGHT {
+            let q = Self::PRIOR.as_secs_f64();
+            s.xy += q * (Self::PRIOR_WEIGHT - s.xx);
+            s.xx = Self::PRIOR_WEIGHT;
+        }
+    }
+}
+
+impl Default for KeypointCost {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 #[cfg(test)]
@@ -57,20 +178,67 @@ mod tests {
 
     const MS: Duration = Duration::from_millis(1);
 
-    #[test]
-    fn the_first_tile_is_always_taken() {
-        assert!(next_tile_fits(MS, 50 * MS, Duration::ZERO, 0).is_ok());
+    fn unit(ms: u64, keypoints: usize) -> UnitCost {
+        UnitCost {
+            time: MS * ms as u32,
+            keypoints,
+        }
     }
 
     #[test]
-    fn a_tile_is_taken_while_the_mean_tile_fits() {
-        // two tiles took 20 ms after 5 ms of decoding: the next takes ~10 ms
-        assert!(next_tile_fits(35 * MS, 25 * MS, 20 * MS, 2).is_ok());
-        let why = next_tile_fits(34 * MS, 25 * MS, 20 * MS, 2).unwrap_err();
+    fn a_tile_is_taken_while_it_fits() {
+        assert!(next_tiles_fit(35 * MS, 25 * MS, 10 * MS, 1).is_ok());
+        let why = next_tiles_fit(34 * MS, 25 * MS, 10 * MS, 1).unwrap_err();
         assert!(why.contains("34.0 ms"), "{why}");
-        assert!(why.contains("about 10.0 ms"), "{why}");
+        assert!(
+            why.contains("the next tile would take about 10.0 ms"),
+            "{why}"
+        );
+        let why = next_tiles_fit(34 * MS, 25 * MS, 20 * MS, 2).unwrap_err();
+        assert!(
+            why.contains("the next 2 tiles would take about 20.0 ms"),
+            "{why}"
+        );
         // already past the budget
-        assert!(next_tile_fits(20 * MS, 25 * MS, 20 * MS, 2).is_err());
+        assert!(next_tiles_fit(20 * MS, 25 * MS, Duration::ZERO, 1).is_err());
+    }
+
+    #[test]
+    fn the_next_tile_is_priced_by_its_keypoints() {
+        // 6 ms apart from keypoints, 0.02 ms a keypoint
+        let q = Duration::from_micros(20);
+        let done = [unit(12, 300), unit(10, 200)];
+        let next = next_tile_time(&done, 100.0, q);
+        assert!((next.as_secs_f64() * 1e3 - 8.0).abs() < 1e-9, "{next:?}");
+        // at no cost a keypoint, the mean of the tiles so far
+        assert_eq!(next_tile_time(&done, 100.0, Duration::ZERO), 11 * MS);
+        // a per-keypoint cost above a tile's own leaves no negative part
+        let next = next_tile_time(&[unit(2, 200)], 0.0, q);
+        assert_eq!(next, Duration::ZERO);
+    }
+
+    #[test]
+    fn the_cost_of_a_keypoint_is_learnt_from_the_requests() {
+        let cost = KeypointCost::new();
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        assert_eq!(cost.per_keypoint(), KeypointCost::PRIOR);
+        // one tile, or tiles alike in keypoints, tell nothing
+        cost.record(&[unit(10, 100)]);
+        cost.record(&[unit(10, 100), unit(12, 100)]);
+        assert!((ms(cost.per_keypoint()) - ms(KeypointCost::PRIOR)).abs() < 1e-9);
+        // a machine where a keypoint costs 0.05 ms: tiles of 5 ms + 0.05 ms each
+        for _ in 0..50 {
+            let tiles: Vec<UnitCost> = [400u64, 250, 150, 50]
+                .iter()
+                .map(|&k| UnitCost {
+                    time: Duration::from_micros(5000 + 50 * k),
+                    keypoints: k as usize,
+                })
+                .collect();
+            cost.record(&tiles);
+        }
+        let learnt = ms(cost.per_keypoint());
+        assert!((learnt - 0.05).abs() < 0.002, "{learnt}");
     }
 
     #[test]

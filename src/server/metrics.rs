@@ -44,6 +44,7 @@ pub const MAP_POSTINGS: &str = "bowloc_map_postings";
 pub const BUILD_INFO: &str = "bowloc_build_info";
 pub const SEQUENCES: &str = "bowloc_sequences_live";
 pub const PLAN_COST: &str = "bowloc_extraction_plan_typical_seconds";
+pub const KEYPOINT_COST: &str = "bowloc_tile_keypoint_seconds";
 pub const SEQUENCE_EVICTIONS: &str = "bowloc_sequence_evictions_total";
 pub const SEQUENCE_RESTARTS: &str = "bowloc_sequence_restarts_total";
 
@@ -173,6 +174,11 @@ fn describe() {
         PLAN_COST,
         Unit::Seconds,
         "Typical request time (geometric mean, without decoding) of streaming extraction with and without the coarse pass, as the learned choice (search.tiles ending in ,auto) sees it."
+    );
+    describe_gauge!(
+        KEYPOINT_COST,
+        Unit::Seconds,
+        "What one keypoint adds to a tile's time (extraction, quantization, votes, checks), as the service has learnt it from the requests served; a time budget prices the next tile with it."
     );
     describe_counter!(
         SEQUENCE_EVICTIONS,
@@ -338,6 +344,11 @@ pub fn coarse_choice(choice: &crate::features::CoarseChoice) {
             gauge!(PLAN_COST, "plan" => plan).set(arm.typical_ms() / 1e3);
         }
     }
+}
+
+/// What a keypoint costs a tile, as the localizer has learnt it.
+pub fn keypoint_cost(cost: Duration) {
+    gauge!(KEYPOINT_COST).set(cost.as_secs_f64());
 }
 
 /// The worker pool's size and occupancy.

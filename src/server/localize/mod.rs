@@ -169,6 +169,7 @@ pub async fn localize(
     if let Some(choice) = &localizer.coarse_choice {
         super::metrics::coarse_choice(choice);
     }
+    super::metrics::keypoint_cost(localizer.keypoint_cost());
     let mut answer = answer;
     if let Some(frame) = held {
         frame.finish(&mut answer, &*snapshot, top_n);

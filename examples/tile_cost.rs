@@ -1,0 +1,154 @@
+//! How well does a time budget foresee the next tile's cost? After `k`
+//! tiles of a `2x2+24` query (richest first, as the service orders them),
+//! the budget ([`bowloc::search::budget`]) predicts the next tile's
+//! extraction time. This replays the eval cache's per-tile timings, FAST
+//! corner counts and keypoints, and prints, for each way of predicting, the
+//! ratio of the predicted to the actual time (median, 10th and 90th
+//! percentiles over queries and tile ends) and how often the prediction was
+//! more than 10 % over or under:
+//!
+//! - `mean of the tiles so far`: the tiles' mean time;
+//! - `keypoints, q ms each`: the tiles' mean time apart from their
+//!   keypoints, plus `q` for each keypoint the next tile is expected to hold
+//!   (the keypoints so far shared out by corners), as
+//!   [`bowloc::search::budget::next_tile_time`] does; `q` first as fitted
+//!   here (the slope of a tile's time against its keypoints among the tiles
+//!   of each query, what the service learns), then at set values;
+//! - `own line`: `q` fitted to the query's own tiles alone (from two on);
+//! - `corners, a = x`: the mean scaled by `a + (1 - a) * c / c̄` (`c` the
+//!   next tile's corners, `c̄` the mean of the tiles so far).
+//!
+//! ```sh
+//! cargo run --release --example tile_cost -- ../shared/datasets/gardens-point 5000 1
+//! ```
+//!
+//! It reads (or fills) the eval's caches in `data/eval-cache/<dataset>`.
+
+use bowloc::eval::cache;
+use bowloc::features::TileGrid;
+use bowloc::search::budget::{UnitCost, next_tile_time};
+use std::time::Duration;
+
+/// One tile as the cache timed it.
+#[derive(Clone, Copy)]
+struct TileRow {
+    ms: f64,
+    corners: f64,
+    keypoints: f64,
+}
+
+/// The slope of time against keypoints, through the origin of centred values.
+fn slope(tiles: &[TileRow]) -> (f64, f64) {
+    let n = tiles.len() as f64;
+    let mk = tiles.iter().map(|t| t.keypoints).sum::<f64>() / n;
+    let mt = tiles.iter().map(|t| t.ms).sum::<f64>() / n;
+    let xy = tiles.iter().map(|t| (t.keypoints - mk) * (t.ms - mt)).sum();
+    let xx = tiles.iter().map(|t| (t.keypoints - mk).powi(2)).sum();
+    (xy, xx)
+}
+
+/// The ratios of `predict(done, next)` to the next tile's time, over every
+/// query and tile end from `first` tiles on, printed as one line.
+fn report(
+    name: &str,
+    tiles: &[Vec<TileRow>],
+    first: usize,
+    predict: &dyn Fn(&[TileRow], &TileRow) -> f64,
+) {
+    let mut ratios: Vec<f64> = tiles
+        .iter()
+        .flat_map(|t| (first..t.len()).map(move |k| (t, k)))
+        .filter(|(t, k)| t[*k].ms > 0.0)
+        .map(|(t, k)| predict(&t[..k], &t[k]) / t[k].ms)
+        .collect();
+    ratios.sort_by(f64::total_cmp);
+    let at = |q: f64| ratios[((ratios.len() - 1) as f64 * q).round() as usize];
+    let share = |f: &dyn Fn(f64) -> bool| {
+        100.0 * ratios.iter().filter(|&&r| f(r)).count() as f64 / ratios.len() as f64
+    };
+    println!(
+        "{name:<28} median {:.3}  p10 {:.3}  p90 {:.3}  over by >10 %: {:4.1} %  under by >10 %: {:4.1} %",
+        at(0.5),
+        at(0.1),
+        at(0.9),
+        share(&|r| r > 1.1),
+        share(&|r| r < 1.0 / 1.1),
+    );
+}
+
+/// The next tile's keypoints expected from its corners: the keypoints so
+/// far per corner so far.
+fn expected_keypoints(done: &[TileRow], next: &TileRow) -> f64 {
+    let corners: f64 = done.iter().map(|t| t.corners).sum();
+    next.corners * done.iter().map(|t| t.keypoints).sum::<f64>() / corners.max(1.0)
+}
+
+/// [`next_tile_time`] at `q` ms a keypoint, in ms.
+fn priced(done: &[TileRow], next: &TileRow, q: f64) -> f64 {
+    let costs: Vec<UnitCost> = done
+        .iter()
+        .map(|t| UnitCost {
+            time: Duration::from_secs_f64(t.ms / 1e3),
+            keypoints: t.keypoints as usize,
+        })
+        .collect();
+    let q = Duration::from_secs_f64(q / 1e3);
+    next_tile_time(&costs, expected_keypoints(done, next), q).as_secs_f64() * 1e3
+}
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let prepared = cache::prepare_from_args(&args, TileGrid::DEFAULT)?;
+    // per query: its tiles, richest first
+    let tiles: Vec<Vec<TileRow>> = prepared
+        .queries
+        .meta()
+        .tiles
+        .iter()
+        .filter(|t| t.len() > 1)
+        .map(|t| {
+            let mut t: Vec<TileRow> = t
+                .iter()
+                .map(|t| TileRow {
+                    ms: t.ms as f64,
+                    corners: t.corners as f64,
+                    keypoints: t.features as f64,
+                })
+                .collect();
+            t.sort_by(|a, b| b.corners.total_cmp(&a.corners));
+            t
+        })
+        .collect();
+    println!(
+        "{}: {} queries of {} tiles; predicted / actual time of the next tile, richest first",
+        prepared.dataset.name,
+        tiles.len(),
+        tiles.first().map_or(0, Vec::len)
+    );
+    let mean = |done: &[TileRow]| done.iter().map(|t| t.ms).sum::<f64>() / done.len() as f64;
+    report("mean of the tiles so far", &tiles, 1, &|d, _| mean(d));
+    let (xy, xx) = tiles
+        .iter()
+        .map(|t| slope(t))
+        .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let fitted = xy / xx;
+    for q in [fitted, 0.02, 0.025, 0.03] {
+        let name = format!("keypoints, {q:.4} ms each");
+        report(&name, &tiles, 1, &|d, n| priced(d, n, q));
+    }
+    report("own line (from 2 tiles)", &tiles, 2, &|d, n| {
+        let (xy, xx) = slope(d);
+        let q = if xx > 0.0 { (xy / xx).max(0.0) } else { 0.0 };
+        priced(d, n, q)
+    });
+    for a in [0.9, 0.8, 0.67, 0.5] {
+        report(&format!("corners, a = {a}"), &tiles, 1, &|d, n| {
+            let c = d.iter().map(|t| t.corners).sum::<f64>() / d.len() as f64;
+            match c > 0.0 {
+                true => mean(d) * (a + (1.0 - a) * n.corners / c),
+                false => mean(d),
+            }
+        });
+    }
+    Ok(())
+}
