@@ -339,7 +339,7 @@ fn cli_reports_bad_input_clearly() {
 
 /// A time budget ends a streamed search at a tile end, after at least one
 /// tile, with the answer of the votes so far; after a coarse pass it asks
-/// room for two tiles; a budget every tile fits in changes nothing, and a
+/// room for three tiles; a budget every tile fits in changes nothing, and a
 /// query extracted whole is never cut. The tiles teach the localizer what a
 /// keypoint costs.
 #[test]
@@ -348,8 +348,9 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
     use bowloc::search::StopKind;
     use std::time::Duration;
     let real = common::real_map("rtabmap-loop", 1000);
-    let localizer = real.localizer(true);
+    let mut localizer = real.localizer(true);
     let grid: TileGrid = "2x2+24".parse().unwrap();
+    localizer.tiles = grid;
     let free = SearchOptions {
         rule: RuleSpec::new("none", None).unwrap(),
         top_n: 5,
@@ -404,7 +405,7 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
             .unwrap();
         assert_eq!(probed.stop.kind, StopKind::Budget, "{}", q.name);
         assert!(
-            probed.stop.detail.contains("the next 2 tiles would take"),
+            probed.stop.detail.contains("the next 3 tiles would take"),
             "{}",
             probed.stop.detail
         );
@@ -420,11 +421,26 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
     }
     // the searches that went through their tiles taught the localizer what
     // a keypoint costs here: something, and less than a millisecond
-    let learnt = localizer.keypoint_cost();
-    assert_ne!(learnt, bowloc::search::budget::KeypointCost::PRIOR);
+    let learnt = localizer.tile_cost().per_keypoint();
+    assert_ne!(learnt, bowloc::search::budget::TileCost::PRIOR);
     assert!(
         learnt > Duration::ZERO && learnt < Duration::from_millis(1),
         "{learnt:?}"
+    );
+    // and what a tile takes: a budget too tight for two starts with the
+    // coarse pass; a loose one, or none, keeps the configured tiles
+    let typical = localizer.tile_cost().typical_tile().unwrap();
+    let under = |budget: Option<Duration>| SearchOptions {
+        rule: RuleSpec::new("place-z", Some(2.0)).unwrap(),
+        budget,
+        ..Default::default()
+    };
+    assert!(localizer.plan(&under(Some(typical)), None).grid.coarse);
+    assert!(!localizer.plan(&under(Some(typical * 3)), None).grid.coarse);
+    assert!(!localizer.plan(&under(None), None).grid.coarse);
+    assert_eq!(
+        localizer.plan(&under(Some(typical)), Some(grid)),
+        bowloc::pipeline::Plan::asked(grid)
     );
 }
 

@@ -182,7 +182,9 @@ pub struct SearchArgs {
     pub tile_order: TileOrder,
     /// A time budget per image, in milliseconds from the start of decoding:
     /// a next tile is extracted only when it is expected to end within it
-    /// (the first tile always; the stop kind is then `budget`).
+    /// (the first tile always; the stop kind is then `budget`). A budget
+    /// too tight for three tiles starts with the coarse pass, unless
+    /// `--tiles` is given.
     #[arg(long, value_parser = budget_ms)]
     pub budget_ms: Option<std::time::Duration>,
 }

@@ -39,6 +39,25 @@ pub enum Tracing {
 /// A loaded vocabulary and map, ready to answer queries. The map may take
 /// changes ([`LiveMap`]); each query searches the snapshot current when it
 /// starts.
+/// How a query is extracted ([`Localizer::plan`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plan {
+    pub grid: TileGrid,
+    /// The grid is the learned coarse pass's choice ([`CoarseChoice`]), so
+    /// what the answer cost teaches it ([`Localizer::learn`]).
+    learned: bool,
+}
+
+impl Plan {
+    /// The grid a caller asked for: nothing to learn from.
+    pub fn asked(grid: TileGrid) -> Self {
+        Self {
+            grid,
+            learned: false,
+        }
+    }
+}
+
 pub struct Localizer {
     pub vocab: Vocabulary,
     pub map: LiveMap,
@@ -57,9 +76,9 @@ pub struct Localizer {
     /// end turns it on.
     verify: VerifyParams,
     fit: OpenCvFit,
-    /// What a keypoint costs a tile, learnt from the requests served (what a
-    /// time budget prices the next tile with).
-    keypoint_cost: search::budget::KeypointCost,
+    /// What tiles cost, learnt from the requests served (what a time budget
+    /// prices the next tile with).
+    tile_cost: search::budget::TileCost,
 }
 
 impl Localizer {
@@ -98,7 +117,7 @@ impl Localizer {
             coarse_choice: None,
             fit: OpenCvFit::new(no_verify.fit()),
             verify: no_verify,
-            keypoint_cost: search::budget::KeypointCost::new(),
+            tile_cost: search::budget::TileCost::new(),
         }
     }
 
@@ -188,22 +207,23 @@ impl Localizer {
         bytes: &[u8],
         options: &SearchOptions,
     ) -> Result<Localization, FeatureError> {
-        let grid = self.grid_for(&options.rule, None);
-        let answer = self.localize_tiled(bytes, options, grid, self.verify.enabled)?;
-        self.learn(&options.rule, None, &answer);
+        let plan = self.plan(options, None);
+        let answer = self.localize_tiled(bytes, options, plan.grid, self.verify.enabled)?;
+        self.learn(plan, &answer);
         Ok(answer)
     }
 
-    /// The tile grid a query is extracted in: the one `asked` for, else the
+    /// How a query is extracted: in the grid `asked` for, else the
     /// configured grid when the rule may stop early, else the whole image (a
     /// search that reads every feature gains nothing from tiles and would pay
     /// their overlap). With a learned coarse pass ([`CoarseChoice`]) the
     /// configured grid starts with it or not as the choice says; pass the
-    /// answer to [`Localizer::learn`].
-    pub fn grid_for(&self, rule: &search::RuleSpec, asked: Option<TileGrid>) -> TileGrid {
-        match asked {
-            Some(grid) => grid,
-            None if rule.info().stops_early => match &self.coarse_choice {
+    /// answer to [`Localizer::learn`]. A time budget too tight for the tiles
+    /// starts with the pass ([`search::budget::pass_first`]).
+    pub fn plan(&self, options: &SearchOptions, asked: Option<TileGrid>) -> Plan {
+        let grid = match asked {
+            Some(grid) => return Plan::asked(grid),
+            None if options.rule.info().stops_early => match &self.coarse_choice {
                 Some(choice) => TileGrid {
                     coarse: choice.choose(),
                     ..self.tiles
@@ -211,21 +231,35 @@ impl Localizer {
                 None => self.tiles,
             },
             None => TileGrid::WHOLE,
+        };
+        let Some(budget) = options.budget else {
+            return Plan {
+                grid,
+                learned: self.coarse_choice.is_some() && options.rule.info().stops_early,
+            };
+        };
+        let tight = search::budget::pass_first(budget, self.tile_cost.typical_tile());
+        Plan {
+            grid: TileGrid {
+                coarse: grid.coarse || (tight && grid.count() > 1),
+                ..grid
+            },
+            // the budget may choose the plan and end it: it teaches nothing
+            learned: false,
         }
     }
 
-    /// What a keypoint costs a tile, as learnt from the requests so far
-    /// ([`search::budget::KeypointCost`]).
-    pub fn keypoint_cost(&self) -> Duration {
-        self.keypoint_cost.per_keypoint()
+    /// What tiles cost, as learnt from the requests so far.
+    pub fn tile_cost(&self) -> &search::budget::TileCost {
+        &self.tile_cost
     }
 
     /// What the search needs next, in tiles, and how long they are
     /// expected to take ([`search::budget`]): after tiles, the next one,
     /// priced by the keypoints it is expected to hold (the tiles' keypoints
     /// so far shared out by their expected shares); after the coarse pass
-    /// alone, [`search::budget::TILES_AFTER_A_PASS`] tiles at what the pass
-    /// took each.
+    /// alone, [`search::budget::TILES_TO_BEAT_THE_PASS`] tiles at what the
+    /// pass took each.
     fn next_tiles_time(
         &self,
         tiles: &Tiles,
@@ -233,7 +267,7 @@ impl Localizer {
         costs: &[search::budget::UnitCost],
     ) -> (Duration, u32) {
         if costs.is_empty() {
-            let n = search::budget::TILES_AFTER_A_PASS;
+            let n = search::budget::TILES_TO_BEAT_THE_PASS;
             return (pass.map_or(Duration::ZERO, |p| p.time * n), n);
         }
         let seen: usize = costs.iter().map(|c| c.keypoints).sum();
@@ -241,19 +275,15 @@ impl Localizer {
             (done, Some(next)) if done > 0.0 => seen as f64 * next / done,
             _ => seen as f64 / costs.len() as f64,
         };
-        let per_keypoint = self.keypoint_cost.per_keypoint();
+        let per_keypoint = self.tile_cost.per_keypoint();
         (search::budget::next_tile_time(costs, next, per_keypoint), 1)
     }
 
-    /// Tell the learned coarse pass what `answer` cost, when its grid was
-    /// the one [`Localizer::grid_for`] chose for `rule` without being
-    /// `asked` for one.
-    pub fn learn(&self, rule: &search::RuleSpec, asked: Option<TileGrid>, answer: &Localization) {
-        // a search its time budget cut short says nothing of what a plan costs
+    /// Tell the learned coarse pass what `answer` cost, when `plan` was its
+    /// choice.
+    pub fn learn(&self, plan: Plan, answer: &Localization) {
         if let Some(choice) = &self.coarse_choice
-            && asked.is_none()
-            && rule.info().stops_early
-            && answer.stop.kind != search::StopKind::Budget
+            && plan.learned
         {
             let t = &answer.timings_ms;
             choice.record(
@@ -394,7 +424,11 @@ impl Localizer {
                 false => costs.push(cost),
             }
         }
-        self.keypoint_cost.record(&costs);
+        // what the tiles of the configured grid cost (not a grid asked for)
+        let tiles_only = |g: TileGrid| TileGrid { coarse: false, ..g };
+        if tiles_only(grid) == tiles_only(self.tiles) {
+            self.tile_cost.record(&costs);
+        }
         let extraction = Extraction {
             tiles_extracted: tiles_used,
             tiles_total: tiles.total(),
@@ -433,7 +467,7 @@ impl Localizer {
     }
 
     /// Read a file and answer it as a query, extracted in the grid `tiles`
-    /// asks for, else as [`Localizer::grid_for`] chooses.
+    /// asks for, else as [`Localizer::plan`] chooses.
     pub fn localize_file(
         &self,
         path: &Path,
@@ -442,11 +476,11 @@ impl Localizer {
     ) -> anyhow::Result<Localization> {
         let bytes =
             std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-        let grid = self.grid_for(&options.rule, tiles);
+        let plan = self.plan(options, tiles);
         let answer = self
-            .localize_tiled(&bytes, options, grid, self.verify.enabled)
+            .localize_tiled(&bytes, options, plan.grid, self.verify.enabled)
             .with_context(|| format!("{}", path.display()))?;
-        self.learn(&options.rule, tiles, &answer);
+        self.learn(plan, &answer);
         Ok(answer)
     }
 }

@@ -16,7 +16,7 @@ pub use extract::{
     Extracted, TileCost, extract_all, extract_all_timed, extract_all_together, extract_interleaved,
     extract_tiled, stack,
 };
-pub use localizer::{Localizer, TRACE_POINTS, Tracing};
+pub use localizer::{Localizer, Plan, TRACE_POINTS, Tracing};
 
 use indicatif::{ProgressBar, ProgressStyle};
 

@@ -12,9 +12,12 @@
 //! time overestimates it (by a median of 32.5 % on gardens-point,
 //! `examples/tile_cost.rs`). [`next_tile_time`] prices the next tile's
 //! expected keypoints instead, at what a keypoint costs on this machine,
-//! which [`KeypointCost`] learns from the requests served. After a coarse
-//! pass the search starts over on the tiles only when
-//! [`TILES_AFTER_A_PASS`] of them fit.
+//! which [`TileCost`] learns from the requests served.
+//!
+//! A tight budget also changes the plan: one that holds fewer than
+//! [`TILES_TO_BEAT_THE_PASS`] tiles starts with the coarse pass
+//! ([`pass_first`]), and after a pass the search starts over on the tiles
+//! only when that many fit.
 
 use std::sync::Mutex;
 use std::time::Duration;
@@ -60,13 +63,21 @@ pub fn next_tile_time(done: &[UnitCost], next_keypoints: f64, per_keypoint: Dura
     Duration::from_secs_f64(apart.max(0.0) + q * next_keypoints.max(0.0))
 }
 
-/// After a coarse pass that did not end the search, the search starts over
-/// on the tiles only when this many are expected to fit in the budget (each
-/// priced at what the pass took): one tile of four shows a quarter of the
-/// image, and a search that started over and was cut after one answered
-/// worse than the pass, which saw all of it at half size (rtabmap-loop,
-/// docs/service.md, "A time budget").
-pub const TILES_AFTER_A_PASS: u32 = 2;
+/// The tiles whose answer beats the coarse pass's: the pass sees the whole
+/// image at half size, one or two richest tiles of four (a quarter or half
+/// of it at full size) answered worse on gardens-point, three better
+/// (docs/service.md, "A time budget"). A budget expected to hold fewer
+/// tiles (at what a tile has taken lately) starts with the pass, whatever
+/// the plan ([`pass_first`]); after a pass that did not end the search, the
+/// search starts over on the tiles only when this many are expected to fit
+/// (each priced at what the pass took).
+pub const TILES_TO_BEAT_THE_PASS: u32 = 3;
+
+/// Whether a search under `budget` should start with the coarse pass, when
+/// a tile takes `typical_tile` (`None`: nothing known yet, no).
+pub fn pass_first(budget: Duration, typical_tile: Option<Duration>) -> bool {
+    typical_tile.is_some_and(|t| t * TILES_TO_BEAT_THE_PASS > budget)
+}
 
 /// `Ok` when the next `tiles` tiles, expected to take `next` together, fit
 /// in `budget`, else why they do not (the stop's detail). `spent`: the time
@@ -93,26 +104,29 @@ pub fn next_tiles_fit(
     ))
 }
 
-/// What a keypoint costs a tile on this machine, learnt from the requests
-/// served: the slope of a tile's time against its keypoints among the tiles
-/// of one request (same grid, same image: they differ in little else),
-/// summed over the recent requests (each request's weight fades by
-/// [`KeypointCost::FADE`] with every one after it, so the figure follows
-/// the machine's speed), starting from [`KeypointCost::PRIOR`].
-pub struct KeypointCost {
-    sums: Mutex<Slope>,
+/// What tiles cost on this machine, learnt from the requests served: what
+/// a keypoint adds to a tile, the slope of a tile's time against its
+/// keypoints among the tiles of one request (same grid, same image: they
+/// differ in little else), and what a tile takes in all. Both are summed
+/// over the recent requests (each request's weight fades by
+/// [`TileCost::FADE`] with every one after it, so the figures follow the
+/// machine's speed); the slope starts from [`TileCost::PRIOR`].
+pub struct TileCost {
+    sums: Mutex<Sums>,
 }
 
-/// Sums of a least-squares slope through the origin of centred values.
 #[derive(Debug, Clone, Copy)]
-struct Slope {
-    /// Σ (keypoints − mean) · (seconds − mean)
+struct Sums {
+    /// Σ (keypoints − mean) · (seconds − mean), over the tiles of each request
     xy: f64,
     /// Σ (keypoints − mean)²
     xx: f64,
+    /// Σ seconds of a request's tiles and how many tiles, faded alike
+    seconds: f64,
+    tiles: f64,
 }
 
-impl KeypointCost {
+impl TileCost {
     /// Before any request: 0.03 ms a keypoint (SIFT describes one in about
     /// 0.024 ms on the 2-vCPU Xeon and EPYC machines of docs/performance.md,
     /// "Where SIFT's time goes", and quantizing and voting it add a little).
@@ -124,30 +138,44 @@ impl KeypointCost {
     pub const FADE: f64 = 0.99;
 
     pub fn new() -> Self {
-        let q = Self::PRIOR.as_secs_f64();
         Self {
-            sums: Mutex::new(Slope {
-                xy: q * Self::PRIOR_WEIGHT,
+            sums: Mutex::new(Sums {
+                xy: Self::PRIOR.as_secs_f64() * Self::PRIOR_WEIGHT,
                 xx: Self::PRIOR_WEIGHT,
+                seconds: 0.0,
+                tiles: 0.0,
             }),
         }
     }
 
-    /// The current estimate (never negative).
+    fn sums(&self) -> Sums {
+        *self.sums.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// What a keypoint adds to a tile (never negative).
     pub fn per_keypoint(&self) -> Duration {
-        let s = *self.sums.lock().unwrap_or_else(|e| e.into_inner());
+        let s = self.sums();
         Duration::from_secs_f64((s.xy / s.xx).max(0.0))
     }
 
-    /// Learn from the tiles of one request (a coarse pass left out: its
-    /// area is not a tile's); fewer than two tell nothing.
+    /// What a tile takes, on average over the recent requests' tiles
+    /// (`None` before the first).
+    pub fn typical_tile(&self) -> Option<Duration> {
+        let s = self.sums();
+        (s.tiles > 0.0).then(|| Duration::from_secs_f64(s.seconds / s.tiles))
+    }
+
+    /// Learn from the tiles of one request in the grid whose tiles this
+    /// prices (a coarse pass left out: its area is not a tile's); the slope
+    /// from two tiles on.
     pub fn record(&self, tiles: &[UnitCost]) {
-        if tiles.len() < 2 {
+        if tiles.is_empty() {
             return;
         }
         let n = tiles.len() as f64;
         let mean_k = tiles.iter().map(|u| u.keypoints as f64).sum::<f64>() / n;
-        let mean_t = tiles.iter().map(|u| u.time.as_secs_f64()).sum::<f64>() / n;
+        let seconds = tiles.iter().map(|u| u.time.as_secs_f64()).sum::<f64>();
+        let mean_t = seconds / n;
         let (mut xy, mut xx) = (0.0, 0.0);
         for u in tiles {
             let dk = u.keypoints as f64 - mean_k;
@@ -155,18 +183,22 @@ impl KeypointCost {
             xx += dk * dk;
         }
         let mut s = self.sums.lock().unwrap_or_else(|e| e.into_inner());
-        // the prior fades too, but never below its own weight's share
+        s.seconds = s.seconds * Self::FADE + seconds;
+        s.tiles = s.tiles * Self::FADE + n;
+        if tiles.len() < 2 {
+            return;
+        }
         s.xy = s.xy * Self::FADE + xy;
         s.xx = s.xx * Self::FADE + xx;
+        // the prior fades too, but never below its own weight
         if s.xx < Self::PRIOR_WEIGHT {
-            let q = Self::PRIOR.as_secs_f64();
-            s.xy += q * (Self::PRIOR_WEIGHT - s.xx);
+            s.xy += Self::PRIOR.as_secs_f64() * (Self::PRIOR_WEIGHT - s.xx);
             s.xx = Self::PRIOR_WEIGHT;
         }
     }
 }
 
-impl Default for KeypointCost {
+impl Default for TileCost {
     fn default() -> Self {
         Self::new()
     }
@@ -218,16 +250,18 @@ mod tests {
     }
 
     #[test]
-    fn the_cost_of_a_keypoint_is_learnt_from_the_requests() {
-        let cost = KeypointCost::new();
+    fn what_tiles_cost_is_learnt_from_the_requests() {
+        let cost = TileCost::new();
         let ms = |d: Duration| d.as_secs_f64() * 1e3;
-        assert_eq!(cost.per_keypoint(), KeypointCost::PRIOR);
-        // one tile, or tiles alike in keypoints, tell nothing
+        assert_eq!(cost.per_keypoint(), TileCost::PRIOR);
+        assert_eq!(cost.typical_tile(), None);
+        // one tile, or tiles alike in keypoints, tell nothing of keypoints
         cost.record(&[unit(10, 100)]);
         cost.record(&[unit(10, 100), unit(12, 100)]);
-        assert!((ms(cost.per_keypoint()) - ms(KeypointCost::PRIOR)).abs() < 1e-9);
+        assert!((ms(cost.per_keypoint()) - ms(TileCost::PRIOR)).abs() < 1e-9);
+        assert!((ms(cost.typical_tile().unwrap()) - 32.0 / 3.0).abs() < 0.1);
         // a machine where a keypoint costs 0.05 ms: tiles of 5 ms + 0.05 ms each
-        for _ in 0..50 {
+        for _ in 0..200 {
             let tiles: Vec<UnitCost> = [400u64, 250, 150, 50]
                 .iter()
                 .map(|&k| UnitCost {
@@ -239,6 +273,16 @@ mod tests {
         }
         let learnt = ms(cost.per_keypoint());
         assert!((learnt - 0.05).abs() < 0.002, "{learnt}");
+        // their mean: 5 + 0.05 · 212.5 ms
+        let typical = ms(cost.typical_tile().unwrap());
+        assert!((typical - 15.625).abs() < 0.1, "{typical}");
+    }
+
+    #[test]
+    fn a_budget_of_less_than_three_tiles_starts_with_the_pass() {
+        assert!(!pass_first(MS, None));
+        assert!(pass_first(38 * MS, Some(13 * MS)));
+        assert!(!pass_first(39 * MS, Some(13 * MS)));
     }
 
     #[test]

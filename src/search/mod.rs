@@ -13,7 +13,9 @@
 //!   extracts no more batches;
 //! - [`rank`]: top-n images with scores comparable across stop points;
 //! - [`trace`]: on request, the vote race as plain data (bounded);
-//! - [`budget`]: a request's time budget, whether one more tile fits in it.
+//! - [`budget`]: a request's time budget: whether one more tile fits in it,
+//!   what tiles cost on this machine, and when a tight one starts with the
+//!   coarse pass.
 //!
 //! [`shard`] runs the same search over a map split into shards by image.
 //!

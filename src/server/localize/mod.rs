@@ -129,8 +129,7 @@ pub async fn localize(
     }
     let mut options = params.options(&defaults)?;
     let asked = params.tiles()?;
-    let tiles = localizer.grid_for(&options.rule, asked);
-    let rule = options.rule.clone();
+    let plan = localizer.plan(&options, asked);
     let verify = params.verify(state.config.verify.enabled)?;
     let tracing = params.tracing()?;
     options.deadline = Some(deadline);
@@ -159,17 +158,17 @@ pub async fn localize(
             if Instant::now() >= deadline {
                 return Err(ApiError::deadline_exceeded()); // no work for a lost cause
             }
-            Ok(worker_localizer.localize_traced(&image, &options, tiles, verify, tracing)?)
+            Ok(worker_localizer.localize_traced(&image, &options, plan.grid, verify, tracing)?)
         })
         .await?;
     if answer.stop.kind == crate::search::StopKind::Deadline && answer.features.used == 0 {
         return Err(ApiError::deadline_exceeded()); // the deadline passed before any vote
     }
-    localizer.learn(&rule, asked, &answer);
+    localizer.learn(plan, &answer);
     if let Some(choice) = &localizer.coarse_choice {
         super::metrics::coarse_choice(choice);
     }
-    super::metrics::keypoint_cost(localizer.keypoint_cost());
+    super::metrics::keypoint_cost(localizer.tile_cost().per_keypoint());
     let mut answer = answer;
     if let Some(frame) = held {
         frame.finish(&mut answer, &*snapshot, top_n);

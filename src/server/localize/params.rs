@@ -80,9 +80,10 @@ pub struct LocalizeParams {
     /// and the network not counted): a streamed query's next tile is
     /// extracted only when it is expected to end within it, so the answer
     /// comes at about that time at the latest, with stop kind `budget` when
-    /// the budget cut it short (the first tile is always extracted; a query
-    /// extracted whole is never cut). Default: the configured
-    /// `search.budget_ms`, else none.
+    /// the budget cut it short (the first tile is always extracted; a budget
+    /// too tight for three tiles starts with the coarse pass, unless `tiles`
+    /// is given; a query extracted whole is never cut). Default: the
+    /// configured `search.budget_ms`, else none.
     #[param(value_type = Option<f64>, exclusive_minimum = 0, maximum = 600000, example = 30)]
     pub budget_ms: Option<String>,
     /// Verify the top vote candidates geometrically and re-rank them by
