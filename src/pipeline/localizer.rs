@@ -36,9 +36,6 @@ pub enum Tracing {
     Full,
 }
 
-/// A loaded vocabulary and map, ready to answer queries. The map may take
-/// changes ([`LiveMap`]); each query searches the snapshot current when it
-/// starts.
 /// How a query is extracted ([`Localizer::plan`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Plan {
@@ -58,6 +55,9 @@ impl Plan {
     }
 }
 
+/// A loaded vocabulary and map, ready to answer queries. The map may take
+/// changes ([`LiveMap`]); each query searches the snapshot current when it
+/// starts.
 pub struct Localizer {
     pub vocab: Vocabulary,
     pub map: LiveMap,

@@ -1,8 +1,8 @@
 //! A request's time budget: whether streaming extraction may extract one
 //! more tile. A caller that must have an answer within a time (a robot's
 //! control loop) gives the budget; after each tile the next one is taken
-//! only if it is expected to end within it. The first tile is always taken,
-//! so every answer has votes behind it. Plain arithmetic on durations: the
+//! only if it is expected to end within it. The first tile (or the coarse
+//! pass) is always taken, so every answer has votes behind it. Plain arithmetic on durations: the
 //! pipeline measures, this decides.
 //!
 //! What a tile costs (its extraction, quantization, votes and checks) is a
