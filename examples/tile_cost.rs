@@ -26,7 +26,7 @@
 
 use bowloc::eval::cache;
 use bowloc::features::TileGrid;
-use bowloc::search::budget::{UnitCost, next_tile_time};
+use bowloc::search::budget::{UnitCost, expected_keypoints, next_tile_time, slope_sums};
 use std::time::Duration;
 
 /// One tile as the cache timed it.
@@ -37,14 +37,20 @@ struct TileRow {
     keypoints: f64,
 }
 
-/// The slope of time against keypoints, through the origin of centred values.
+impl TileRow {
+    fn unit(&self) -> UnitCost {
+        UnitCost {
+            time: Duration::from_secs_f64(self.ms / 1e3),
+            keypoints: self.keypoints as usize,
+        }
+    }
+}
+
+/// [`slope_sums`] of `tiles`, in ms.
 fn slope(tiles: &[TileRow]) -> (f64, f64) {
-    let n = tiles.len() as f64;
-    let mk = tiles.iter().map(|t| t.keypoints).sum::<f64>() / n;
-    let mt = tiles.iter().map(|t| t.ms).sum::<f64>() / n;
-    let xy = tiles.iter().map(|t| (t.keypoints - mk) * (t.ms - mt)).sum();
-    let xx = tiles.iter().map(|t| (t.keypoints - mk).powi(2)).sum();
-    (xy, xx)
+    let units: Vec<UnitCost> = tiles.iter().map(TileRow::unit).collect();
+    let (xy, xx) = slope_sums(&units);
+    (xy * 1e3, xx)
 }
 
 /// The ratios of `predict(done, next)` to the next tile's time, over every
@@ -76,24 +82,15 @@ fn report(
     );
 }
 
-/// The next tile's keypoints expected from its corners: the keypoints so
-/// far per corner so far.
-fn expected_keypoints(done: &[TileRow], next: &TileRow) -> f64 {
-    let corners: f64 = done.iter().map(|t| t.corners).sum();
-    next.corners * done.iter().map(|t| t.keypoints).sum::<f64>() / corners.max(1.0)
-}
-
-/// [`next_tile_time`] at `q` ms a keypoint, in ms.
+/// [`next_tile_time`] at `q` ms a keypoint, in ms, the next tile's
+/// keypoints expected from the corners ([`expected_keypoints`]).
 fn priced(done: &[TileRow], next: &TileRow, q: f64) -> f64 {
-    let costs: Vec<UnitCost> = done
-        .iter()
-        .map(|t| UnitCost {
-            time: Duration::from_secs_f64(t.ms / 1e3),
-            keypoints: t.keypoints as usize,
-        })
-        .collect();
+    let costs: Vec<UnitCost> = done.iter().map(TileRow::unit).collect();
+    let seen = costs.iter().map(|c| c.keypoints).sum();
+    let corners = done.iter().map(|t| t.corners).sum();
+    let expected = expected_keypoints(seen, done.len(), corners, Some(next.corners));
     let q = Duration::from_secs_f64(q / 1e3);
-    next_tile_time(&costs, expected_keypoints(done, next), q).as_secs_f64() * 1e3
+    next_tile_time(&costs, expected, q).as_secs_f64() * 1e3
 }
 
 fn main() -> anyhow::Result<()> {

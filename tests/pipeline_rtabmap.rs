@@ -422,7 +422,7 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
     // the searches that went through their tiles taught the localizer what
     // a keypoint costs here: something, and less than a millisecond
     let learnt = localizer.tile_cost().per_keypoint();
-    assert_ne!(learnt, bowloc::search::budget::TileCost::PRIOR);
+    assert_ne!(learnt, bowloc::search::budget::TileCostModel::PRIOR);
     assert!(
         learnt > Duration::ZERO && learnt < Duration::from_millis(1),
         "{learnt:?}"

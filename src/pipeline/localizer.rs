@@ -78,7 +78,7 @@ pub struct Localizer {
     fit: OpenCvFit,
     /// What tiles cost, learnt from the requests served (what a time budget
     /// prices the next tile with).
-    tile_cost: search::budget::TileCost,
+    tile_cost: search::budget::TileCostModel,
 }
 
 impl Localizer {
@@ -117,7 +117,7 @@ impl Localizer {
             coarse_choice: None,
             fit: OpenCvFit::new(no_verify.fit()),
             verify: no_verify,
-            tile_cost: search::budget::TileCost::new(),
+            tile_cost: search::budget::TileCostModel::new(),
         }
     }
 
@@ -250,7 +250,7 @@ impl Localizer {
     }
 
     /// What tiles cost, as learnt from the requests so far.
-    pub fn tile_cost(&self) -> &search::budget::TileCost {
+    pub fn tile_cost(&self) -> &search::budget::TileCostModel {
         &self.tile_cost
     }
 
@@ -271,10 +271,12 @@ impl Localizer {
             return (pass.map_or(Duration::ZERO, |p| p.time * n), n);
         }
         let seen: usize = costs.iter().map(|c| c.keypoints).sum();
-        let next = match (tiles.share_extracted(), tiles.share_of_next()) {
-            (done, Some(next)) if done > 0.0 => seen as f64 * next / done,
-            _ => seen as f64 / costs.len() as f64,
-        };
+        let next = search::budget::expected_keypoints(
+            seen,
+            costs.len(),
+            tiles.share_extracted(),
+            tiles.share_of_next(),
+        );
         let per_keypoint = self.tile_cost.per_keypoint();
         (search::budget::next_tile_time(costs, next, per_keypoint), 1)
     }

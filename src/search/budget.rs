@@ -9,10 +9,10 @@
 //! part that comes with its area, about the same for every tile of a grid,
 //! and a part per keypoint; tiles are extracted richest first, so the next
 //! one usually holds fewer keypoints than those before it, and their mean
-//! time overestimates it (by a median of 32.5 % on gardens-point,
-//! `examples/tile_cost.rs`). [`next_tile_time`] prices the next tile's
+//! time overestimates it (by a median of 32.5 % on gardens-point, on a
+//! 2-vCPU Intel Xeon; docs/service.md, "A time budget"). [`next_tile_time`] prices the next tile's
 //! expected keypoints instead, at what a keypoint costs on this machine,
-//! which [`TileCost`] learns from the requests served.
+//! which [`TileCostModel`] learns from the requests served.
 //!
 //! A tight budget also changes the plan: one that holds fewer than
 //! [`TILES_TO_BEAT_THE_PASS`] tiles starts with the coarse pass
@@ -63,6 +63,35 @@ pub fn next_tile_time(done: &[UnitCost], next_keypoints: f64, per_keypoint: Dura
     Duration::from_secs_f64(apart.max(0.0) + q * next_keypoints.max(0.0))
 }
 
+/// The keypoints the next tile is expected to hold: the `seen` keypoints
+/// of the `done` tiles so far shared out by expected shares (`share_done`
+/// of the image's, `share_next` the next tile's; by corners, or area), or
+/// their mean per tile when the shares say nothing.
+pub fn expected_keypoints(
+    seen: usize,
+    done: usize,
+    share_done: f64,
+    share_next: Option<f64>,
+) -> f64 {
+    match share_next {
+        Some(next) if share_done > 0.0 => seen as f64 * next / share_done,
+        _ => seen as f64 / done.max(1) as f64,
+    }
+}
+
+/// The sums of a least-squares slope of time (seconds) against keypoints
+/// among `tiles`, through the origin of their centred values:
+/// (Σ Δkeypoints · Δseconds, Σ Δkeypoints²).
+pub fn slope_sums(tiles: &[UnitCost]) -> (f64, f64) {
+    let n = tiles.len().max(1) as f64;
+    let mean_k = tiles.iter().map(|u| u.keypoints as f64).sum::<f64>() / n;
+    let mean_t = tiles.iter().map(|u| u.time.as_secs_f64()).sum::<f64>() / n;
+    tiles.iter().fold((0.0, 0.0), |(xy, xx), u| {
+        let dk = u.keypoints as f64 - mean_k;
+        (xy + dk * (u.time.as_secs_f64() - mean_t), xx + dk * dk)
+    })
+}
+
 /// The tiles whose answer beats the coarse pass's: the pass sees the whole
 /// image at half size, one or two richest tiles of four (a quarter or half
 /// of it at full size) answered worse on gardens-point, three better
@@ -104,14 +133,15 @@ pub fn next_tiles_fit(
     ))
 }
 
-/// What tiles cost on this machine, learnt from the requests served: what
+/// What tiles cost on this machine, learnt from the requests served (not
+/// [`crate::pipeline::TileCost`], one tile's measured cost in the eval): what
 /// a keypoint adds to a tile, the slope of a tile's time against its
 /// keypoints among the tiles of one request (same grid, same image: they
 /// differ in little else), and what a tile takes in all. Both are summed
 /// over the recent requests (each request's weight fades by
-/// [`TileCost::FADE`] with every one after it, so the figures follow the
-/// machine's speed); the slope starts from [`TileCost::PRIOR`].
-pub struct TileCost {
+/// [`TileCostModel::FADE`] with every one after it, so the figures follow the
+/// machine's speed); the slope starts from [`TileCostModel::PRIOR`].
+pub struct TileCostModel {
     sums: Mutex<Sums>,
 }
 
@@ -126,7 +156,7 @@ struct Sums {
     tiles: f64,
 }
 
-impl TileCost {
+impl TileCostModel {
     /// Before any request: 0.03 ms a keypoint (SIFT describes one in about
     /// 0.024 ms on the 2-vCPU Xeon and EPYC machines of docs/performance.md,
     /// "Where SIFT's time goes", and quantizing and voting it add a little).
@@ -173,15 +203,8 @@ impl TileCost {
             return;
         }
         let n = tiles.len() as f64;
-        let mean_k = tiles.iter().map(|u| u.keypoints as f64).sum::<f64>() / n;
         let seconds = tiles.iter().map(|u| u.time.as_secs_f64()).sum::<f64>();
-        let mean_t = seconds / n;
-        let (mut xy, mut xx) = (0.0, 0.0);
-        for u in tiles {
-            let dk = u.keypoints as f64 - mean_k;
-            xy += dk * (u.time.as_secs_f64() - mean_t);
-            xx += dk * dk;
-        }
+        let (xy, xx) = slope_sums(tiles);
         let mut s = self.sums.lock().unwrap_or_else(|e| e.into_inner());
         s.seconds = s.seconds * Self::FADE + seconds;
         s.tiles = s.tiles * Self::FADE + n;
@@ -198,7 +221,7 @@ impl TileCost {
     }
 }
 
-impl Default for TileCost {
+impl Default for TileCostModel {
     fn default() -> Self {
         Self::new()
     }
@@ -251,14 +274,14 @@ mod tests {
 
     #[test]
     fn what_tiles_cost_is_learnt_from_the_requests() {
-        let cost = TileCost::new();
+        let cost = TileCostModel::new();
         let ms = |d: Duration| d.as_secs_f64() * 1e3;
-        assert_eq!(cost.per_keypoint(), TileCost::PRIOR);
+        assert_eq!(cost.per_keypoint(), TileCostModel::PRIOR);
         assert_eq!(cost.typical_tile(), None);
         // one tile, or tiles alike in keypoints, tell nothing of keypoints
         cost.record(&[unit(10, 100)]);
         cost.record(&[unit(10, 100), unit(12, 100)]);
-        assert!((ms(cost.per_keypoint()) - ms(TileCost::PRIOR)).abs() < 1e-9);
+        assert!((ms(cost.per_keypoint()) - ms(TileCostModel::PRIOR)).abs() < 1e-9);
         assert!((ms(cost.typical_tile().unwrap()) - 32.0 / 3.0).abs() < 0.1);
         // a machine where a keypoint costs 0.05 ms: tiles of 5 ms + 0.05 ms each
         for _ in 0..200 {
