@@ -18,6 +18,11 @@
 //! - `corners, a = x`: the mean scaled by `a + (1 - a) * c / c̄` (`c` the
 //!   next tile's corners, `c̄` the mean of the tiles so far).
 //!
+//! Then the same for all the tiles left after `k` (what a stop after `k`
+//! tiles saved, as the answer's `tiles.saved_ms` prices it): the mean of the
+//! tiles so far times the tiles left, against each tile left priced by its
+//! keypoints ([`bowloc::search::budget::tiles_left_time`]).
+//!
 //! ```sh
 //! cargo run --release --example tile_cost -- ../shared/datasets/gardens-point 5000 1
 //! ```
@@ -26,7 +31,7 @@
 
 use bowloc::eval::cache;
 use bowloc::features::TileGrid;
-use bowloc::search::budget::{UnitCost, expected_keypoints, next_tile_time, slope_sums};
+use bowloc::search::budget::{UnitCost, slope_sums, tiles_left_time};
 use std::time::Duration;
 
 /// One tile as the cache timed it.
@@ -61,11 +66,25 @@ fn report(
     first: usize,
     predict: &dyn Fn(&[TileRow], &TileRow) -> f64,
 ) {
+    report_ahead(name, tiles, first, &|done, left| predict(done, &left[0]), 1);
+}
+
+/// The ratios of `predict(done, ahead)` to the time of the `ahead` tiles
+/// after `done` (all those left when `ahead` is `usize::MAX`), over every
+/// query and tile end from `first` tiles on, printed as one line.
+fn report_ahead(
+    name: &str,
+    tiles: &[Vec<TileRow>],
+    first: usize,
+    predict: &dyn Fn(&[TileRow], &[TileRow]) -> f64,
+    ahead: usize,
+) {
     let mut ratios: Vec<f64> = tiles
         .iter()
         .flat_map(|t| (first..t.len()).map(move |k| (t, k)))
-        .filter(|(t, k)| t[*k].ms > 0.0)
-        .map(|(t, k)| predict(&t[..k], &t[k]) / t[k].ms)
+        .map(|(t, k)| (&t[..k], &t[k..(k.saturating_add(ahead)).min(t.len())]))
+        .filter(|(_, left)| left.iter().map(|t| t.ms).sum::<f64>() > 0.0)
+        .map(|(done, left)| predict(done, left) / left.iter().map(|t| t.ms).sum::<f64>())
         .collect();
     ratios.sort_by(f64::total_cmp);
     let at = |q: f64| ratios[((ratios.len() - 1) as f64 * q).round() as usize];
@@ -82,15 +101,14 @@ fn report(
     );
 }
 
-/// [`next_tile_time`] at `q` ms a keypoint, in ms, the next tile's
-/// keypoints expected from the corners ([`expected_keypoints`]).
-fn priced(done: &[TileRow], next: &TileRow, q: f64) -> f64 {
+/// [`tiles_left_time`] of the tiles `left` at `q` ms a keypoint, in ms,
+/// their keypoints expected from the corners.
+fn priced(done: &[TileRow], left: &[TileRow], q: f64) -> f64 {
     let costs: Vec<UnitCost> = done.iter().map(TileRow::unit).collect();
-    let seen = costs.iter().map(|c| c.keypoints).sum();
     let corners = done.iter().map(|t| t.corners).sum();
-    let expected = expected_keypoints(seen, done.len(), corners, Some(next.corners));
+    let shares: Vec<f64> = left.iter().map(|t| t.corners).collect();
     let q = Duration::from_secs_f64(q / 1e3);
-    next_tile_time(&costs, expected, q).as_secs_f64() * 1e3
+    tiles_left_time(&costs, corners, &shares, q).as_secs_f64() * 1e3
 }
 
 fn main() -> anyhow::Result<()> {
@@ -131,12 +149,14 @@ fn main() -> anyhow::Result<()> {
     let fitted = xy / xx;
     for q in [fitted, 0.02, 0.025, 0.03] {
         let name = format!("keypoints, {q:.4} ms each");
-        report(&name, &tiles, 1, &|d, n| priced(d, n, q));
+        report(&name, &tiles, 1, &|d, n| {
+            priced(d, std::slice::from_ref(n), q)
+        });
     }
     report("own line (from 2 tiles)", &tiles, 2, &|d, n| {
         let (xy, xx) = slope(d);
         let q = if xx > 0.0 { (xy / xx).max(0.0) } else { 0.0 };
-        priced(d, n, q)
+        priced(d, std::slice::from_ref(n), q)
     });
     for a in [0.9, 0.8, 0.67, 0.5] {
         report(&format!("corners, a = {a}"), &tiles, 1, &|d, n| {
@@ -147,5 +167,21 @@ fn main() -> anyhow::Result<()> {
             }
         });
     }
+    println!("predicted / actual time of all the tiles left, richest first");
+    report_ahead(
+        "mean so far × tiles left",
+        &tiles,
+        1,
+        &|d, left| mean(d) * left.len() as f64,
+        usize::MAX,
+    );
+    let name = format!("keypoints, {fitted:.4} ms each");
+    report_ahead(
+        &name,
+        &tiles,
+        1,
+        &|d, left| priced(d, left, fitted),
+        usize::MAX,
+    );
     Ok(())
 }

@@ -385,6 +385,10 @@ async fn the_page_localizes_an_upload_and_shows_errors() {
             .contains("time budget 0.0 ms")
     })
     .await;
+    // and the tiles it skipped show as time saved
+    let usage = text(&client, "usage").await;
+    assert!(usage.contains("Tiles: 1 of"), "{usage}");
+    assert!(usage.contains("ms of extraction saved"), "{usage}");
 
     client.close().await.unwrap();
     let _ = stop.send(());

@@ -384,6 +384,8 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
             cut.stop.detail
         );
         assert_eq!((cut.tiles.extracted, cut.tiles.total), (1, 4), "{}", q.name);
+        // the three tiles skipped, priced from the first one's cost
+        assert!(cut.tiles.saved_ms > 0.0, "{}", q.name);
         assert!(cut.features.used > 0, "{}", q.name);
         assert!(!cut.candidates.is_empty(), "{}", q.name);
 
@@ -392,6 +394,7 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
             .localize_file(&q.path, &loose, Some(grid))
             .unwrap();
         assert_eq!(fits.tiles.extracted, 4, "{}", q.name);
+        assert_eq!(fits.tiles.saved_ms, 0.0, "{}", q.name);
         assert_eq!(fits.stop.kind, all.stop.kind, "{}", q.name);
         assert_eq!(fits.features.used, all.features.used, "{}", q.name);
         assert_eq!(ids(&fits), ids(&all), "{}", q.name);
@@ -410,6 +413,8 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
             probed.stop.detail
         );
         assert_eq!((probed.tiles.extracted, probed.tiles.total), (1, 5));
+        // the four tiles after the pass, at what a tile has taken lately
+        assert!(probed.tiles.saved_ms > 0.0, "{}", q.name);
         assert!(probed.features.used > 0, "{}", q.name);
         assert!(!probed.candidates.is_empty(), "{}", q.name);
 

@@ -375,7 +375,13 @@ impl Tiles {
     /// The expected share of the image's keypoints in the unit extracted
     /// next, as [`Tiles::share_of_last`] counts it (`None`: none is left).
     pub fn share_of_next(&self) -> Option<f64> {
-        self.shares.get(self.next).copied()
+        self.shares_left().first().copied()
+    }
+
+    /// The expected shares of the units not extracted yet, in the order
+    /// they would come, as [`Tiles::share_of_last`] counts them.
+    pub fn shares_left(&self) -> &[f64] {
+        &self.shares[self.next.min(self.shares.len())..]
     }
 
     /// Extract the next unit: its features in frame coordinates.

@@ -270,15 +270,35 @@ impl Localizer {
             let n = search::budget::TILES_TO_BEAT_THE_PASS;
             return (pass.map_or(Duration::ZERO, |p| p.time * n), n);
         }
-        let seen: usize = costs.iter().map(|c| c.keypoints).sum();
-        let next = search::budget::expected_keypoints(
-            seen,
-            costs.len(),
-            tiles.share_extracted(),
-            tiles.share_of_next(),
-        );
+        let next = &tiles.shares_left()[..1];
+        (self.priced(tiles, costs, next), 1)
+    }
+
+    /// The tiles with expected shares `left` after those of `costs` (at
+    /// least one), priced as [`search::budget::tiles_left_time`] prices them.
+    fn priced(&self, tiles: &Tiles, costs: &[search::budget::UnitCost], left: &[f64]) -> Duration {
         let per_keypoint = self.tile_cost.per_keypoint();
-        (search::budget::next_tile_time(costs, next, per_keypoint), 1)
+        search::budget::tiles_left_time(costs, tiles.share_extracted(), left, per_keypoint)
+    }
+
+    /// What the tiles not extracted yet would have taken: a stop's saving.
+    /// After tiles, each priced by its expected keypoints; after the coarse
+    /// pass alone, each at what a tile of the configured grid has taken
+    /// lately (at what the pass took before any has).
+    fn skipped_time(
+        &self,
+        tiles: &Tiles,
+        pass: Option<search::budget::UnitCost>,
+        costs: &[search::budget::UnitCost],
+    ) -> Duration {
+        let left = tiles.shares_left();
+        match costs.is_empty() {
+            false => self.priced(tiles, costs, left),
+            true => {
+                let each = self.tile_cost.typical_tile().or(pass.map(|p| p.time));
+                each.unwrap_or_default() * left.len() as u32
+            }
+        }
     }
 
     /// Tell the learned coarse pass what `answer` cost, when `plan` was its
@@ -361,6 +381,8 @@ impl Localizer {
         let mut tiles_used = 0;
         // what the coarse pass and each tile after it cost
         let (mut pass, mut costs) = (None, Vec::new());
+        // what the tiles the search stopped before would have taken
+        let mut skipped = None;
         loop {
             // a budget ends a search only where a tile is left to skip, and
             // never before the first (after a coarse pass, with the pass's
@@ -374,6 +396,9 @@ impl Localizer {
                 {
                     search.end(search::StopKind::Budget, why);
                 }
+            }
+            if search.stopped() && skipped.is_none() {
+                skipped = Some(self.skipped_time(&tiles, pass, &costs));
             }
             if search.stopped() && full.as_ref().is_none_or(Search::stopped) {
                 break;
@@ -438,6 +463,7 @@ impl Localizer {
             tile_order: options.tile_order,
             expected_features: search.tally().total_or_estimate(),
             complete: tiles_used == tiles.total(),
+            skipped: skipped.unwrap_or_default(),
         };
         let edge = EdgeTimings {
             decode: decoded - started,

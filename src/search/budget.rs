@@ -79,6 +79,26 @@ pub fn expected_keypoints(
     }
 }
 
+/// The expected time of the tiles `left` (each one's expected share of the
+/// image's keypoints, as [`expected_keypoints`] reads it) after the tiles
+/// `done` (at least one), which held `share_done` of them: each priced as
+/// [`next_tile_time`] prices the next one. For the next tile alone, pass its
+/// share; for all the tiles a stop skipped, theirs (what the stop saved).
+pub fn tiles_left_time(
+    done: &[UnitCost],
+    share_done: f64,
+    left: &[f64],
+    per_keypoint: Duration,
+) -> Duration {
+    let seen = done.iter().map(|c| c.keypoints).sum();
+    left.iter()
+        .map(|&share| {
+            let keypoints = expected_keypoints(seen, done.len(), share_done, Some(share));
+            next_tile_time(done, keypoints, per_keypoint)
+        })
+        .sum()
+}
+
 /// The sums of a least-squares slope of time (seconds) against keypoints
 /// among `tiles`, through the origin of their centred values:
 /// (Σ Δkeypoints · Δseconds, Σ Δkeypoints²).
@@ -270,6 +290,22 @@ mod tests {
         // a per-keypoint cost above a tile's own leaves no negative part
         let next = next_tile_time(&[unit(2, 200)], 0.0, q);
         assert_eq!(next, Duration::ZERO);
+    }
+
+    #[test]
+    fn the_tiles_left_are_priced_each_by_its_share() {
+        // 6 ms apart from keypoints, 0.02 ms a keypoint; the two tiles done
+        // held 500 keypoints, half the image's expected
+        let q = Duration::from_micros(20);
+        let done = [unit(12, 300), unit(10, 200)];
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        // the next alone: 0.1 of the image, 100 keypoints, 8 ms
+        let next = tiles_left_time(&done, 0.5, &[0.1], q);
+        assert!((ms(next) - 8.0).abs() < 1e-9, "{next:?}");
+        // both left: 100 and 400 keypoints, 8 + 14 ms
+        let both = tiles_left_time(&done, 0.5, &[0.1, 0.4], q);
+        assert!((ms(both) - 22.0).abs() < 1e-9, "{both:?}");
+        assert_eq!(tiles_left_time(&done, 0.5, &[], q), Duration::ZERO);
     }
 
     #[test]

@@ -29,6 +29,7 @@ impl From<&Localization> for pb::Localization {
                 total: a.tiles.total as u32,
                 grid: a.tiles.grid.to_string(),
                 order: a.tiles.order.to_string(),
+                saved_ms: a.tiles.saved_ms,
             }),
             rule: Some(pb::Rule {
                 name: a.rule.name.clone(),

@@ -175,9 +175,9 @@ check "multipart upload gives the same answer" test \
 # a time budget no tile fits in: the first tile, and the answer of its votes
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" \
   "$BASE/localize?top_n=3&seed=7&tiles=2x2%2B24&budget_ms=0.001")
-check "budget_ms ends the search after its first tile, with an answer" test \
-  "$status/$(jq -r '[.stop.kind, .tiles.extracted, .tiles.total, (.candidates | length > 0)] | join(",")' "$B")" \
-  = "200/budget,1,4,true"
+check "budget_ms ends the search after its first tile, with an answer and the time it saved" test \
+  "$status/$(jq -r '[.stop.kind, .tiles.extracted, .tiles.total, (.candidates | length > 0), (.tiles.saved_ms > 0)] | join(",")' "$B")" \
+  = "200/budget,1,4,true,true"
 status=$(req "$B" -H 'Content-Type: application/octet-stream' --data-binary @"$IMG" "$BASE/localize")
 check "application/octet-stream is accepted" test "$status" = 200
 s1=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize"; jq -r .seed "$B")
@@ -212,21 +212,21 @@ check "rule verified answers with inlier counts ($(jq -c '{tiles, stop: .stop.de
   and .tiles.extracted <= .tiles.total and .features.extracted >= .features.used' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=3x2%2B16&seed=3")
 check "tiles=3x2+16: the full search extracts all 6 tiles" jqt --arg s "$status" '
-  $s == "200" and .tiles == {"extracted": 6, "total": 6, "grid": "3x2+16", "order": "richest"}
+  $s == "200" and .tiles == {"extracted": 6, "total": 6, "grid": "3x2+16", "order": "richest", "saved_ms": 0}
   and .features.extracted == .features.total and .features.used == .features.total' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=3x2+16&seed=3")
 check "tiles=3x2+16 with its + unescaped (a space in a query string) names the same grid" jqt --arg s "$status" '
   $s == "200" and .tiles.grid == "3x2+16" and .tiles.total == 6' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&seed=3")
 check "rule=none without tiles= extracts the image whole" jqt --arg s "$status" '
-  $s == "200" and .tiles == {"extracted": 1, "total": 1, "grid": "1x1+0", "order": "richest"}
+  $s == "200" and .tiles == {"extracted": 1, "total": 1, "grid": "1x1+0", "order": "richest", "saved_ms": 0}
   and .features.used == .features.total' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=2x2%2B24&tile_order=random&seed=3")
 check "tile_order=random is reported and extracts every tile" jqt --arg s "$status" '
-  $s == "200" and .tiles == {"extracted": 4, "total": 4, "grid": "2x2+24", "order": "random"}' "$B"
+  $s == "200" and .tiles == {"extracted": 4, "total": 4, "grid": "2x2+24", "order": "random", "saved_ms": 0}' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=none&tiles=2x2%2B24&tile_order=spread&seed=3")
 check "tile_order=spread is reported and extracts every tile" jqt --arg s "$status" '
-  $s == "200" and .tiles == {"extracted": 4, "total": 4, "grid": "2x2+24", "order": "spread"}' "$B"
+  $s == "200" and .tiles == {"extracted": 4, "total": 4, "grid": "2x2+24", "order": "spread", "saved_ms": 0}' "$B"
 status=$(req "$B" -H 'Content-Type: image/jpeg' --data-binary @"$IMG" "$BASE/localize?rule=place-z&threshold=2&or_verified=12&seed=3")
 check "or_verified=12 beside place-z is reported and verifies the answer ($(jq -c .stop.detail "$B"))" jqt --arg s "$status" '
   $s == "200" and .rule.name == "place-z" and .rule.or_verified == 12

@@ -576,7 +576,8 @@ function drawTimings(answer) {
     `Features: ${f.used} voted of ${f.extracted} extracted, ${f.total} in the image` +
     `${answer.tiles.extracted < answer.tiles.total ? " (estimated)" : ""}: ` +
     `${(f.fraction * 100).toFixed(1)} % used. ` +
-    `Tiles: ${answer.tiles.extracted} of ${answer.tiles.total} extracted (grid ${answer.tiles.grid}).`;
+    `Tiles: ${answer.tiles.extracted} of ${answer.tiles.total} extracted (grid ${answer.tiles.grid})` +
+    (answer.tiles.saved_ms > 0 ? `, about ${fmt(answer.tiles.saved_ms)} ms of extraction saved.` : ".");
 }
 
 window.addEventListener("resize", () => {
