@@ -18,7 +18,9 @@
 //! - `corners, a = x`: the mean scaled by `a + (1 - a) * c / c̄` (`c` the
 //!   next tile's corners, `c̄` the mean of the tiles so far).
 //!
-//! Then the same for all the tiles left after `k` (what a stop after `k`
+//! First it prints the mean time of the tiles at each place in the order
+//! (what the budget's plan prices the first tiles at). Then the
+//! predictions, and then the same for all the tiles left after `k` (what a stop after `k`
 //! tiles saved, as the answer's `tiles.saved_ms` prices it): the mean of the
 //! tiles so far times the tiles left, against each tile left priced by its
 //! keypoints ([`bowloc::search::budget::tiles_left_time`]).
@@ -141,6 +143,26 @@ fn main() -> anyhow::Result<()> {
         tiles.first().map_or(0, Vec::len)
     );
     let mean = |done: &[TileRow]| done.iter().map(|t| t.ms).sum::<f64>() / done.len() as f64;
+    let width = tiles.iter().map(Vec::len).max().unwrap_or(0);
+    let at: Vec<String> = (0..width)
+        .map(|k| {
+            let times: Vec<f64> = tiles
+                .iter()
+                .filter_map(|t| t.get(k))
+                .map(|t| t.ms)
+                .collect();
+            format!(
+                "{:.2}",
+                times.iter().sum::<f64>() / times.len().max(1) as f64
+            )
+        })
+        .collect();
+    let all: Vec<TileRow> = tiles.iter().flatten().copied().collect();
+    println!(
+        "mean ms of the 1st, 2nd, … tile: {}; of any tile: {:.2}",
+        at.join(", "),
+        mean(&all)
+    );
     report("mean of the tiles so far", &tiles, 1, &|d, _| mean(d));
     let (xy, xx) = tiles
         .iter()

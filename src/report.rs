@@ -342,8 +342,8 @@ pub struct TileUse {
     /// extracted). Each is priced as a time budget prices the next tile: the
     /// mean time of the tiles extracted apart from their keypoints, plus the
     /// keypoints it was expected to hold (by its FAST corners) at what a
-    /// keypoint has cost this server lately; after the coarse pass alone, at
-    /// what a tile has taken lately.
+    /// keypoint has cost this server lately; after the coarse pass alone,
+    /// each at what the tile at its place in the order has taken lately.
     pub saved_ms: f64,
 }
 

@@ -432,19 +432,30 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
         learnt > Duration::ZERO && learnt < Duration::from_millis(1),
         "{learnt:?}"
     );
-    // and what a tile takes: a budget too tight for two starts with the
-    // coarse pass; a loose one, or none, keeps the configured tiles
-    let typical = localizer.tile_cost().typical_tile().unwrap();
+    // and what the first tiles take, the richest first costing most: a
+    // budget too tight for three starts with the coarse pass; a loose one,
+    // or none, keeps the configured tiles
+    let cost = localizer.tile_cost();
+    let (first, three) = (cost.first_tiles(1).unwrap(), cost.first_tiles(3).unwrap());
+    assert!(
+        first > Duration::ZERO && three > first,
+        "{first:?} {three:?}"
+    );
     let under = |budget: Option<Duration>| SearchOptions {
         rule: RuleSpec::new("place-z", Some(2.0)).unwrap(),
         budget,
         ..Default::default()
     };
-    assert!(localizer.plan(&under(Some(typical)), None).grid.coarse);
-    assert!(!localizer.plan(&under(Some(typical * 3)), None).grid.coarse);
+    assert!(
+        localizer
+            .plan(&under(Some(three * 9 / 10)), None)
+            .grid
+            .coarse
+    );
+    assert!(!localizer.plan(&under(Some(three)), None).grid.coarse);
     assert!(!localizer.plan(&under(None), None).grid.coarse);
     assert_eq!(
-        localizer.plan(&under(Some(typical)), Some(grid)),
+        localizer.plan(&under(Some(three)), Some(grid)),
         bowloc::pipeline::Plan::asked(grid)
     );
 }

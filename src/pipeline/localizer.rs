@@ -238,7 +238,8 @@ impl Localizer {
                 learned: self.coarse_choice.is_some() && options.rule.info().stops_early,
             };
         };
-        let tight = search::budget::pass_first(budget, self.tile_cost.typical_tile());
+        let first = search::budget::TILES_TO_BEAT_THE_PASS as usize;
+        let tight = search::budget::pass_first(budget, self.tile_cost.first_tiles(first));
         Plan {
             grid: TileGrid {
                 coarse: grid.coarse || (tight && grid.count() > 1),
@@ -283,8 +284,8 @@ impl Localizer {
 
     /// What the tiles not extracted yet would have taken: a stop's saving.
     /// After tiles, each priced by its expected keypoints; after the coarse
-    /// pass alone, each at what a tile of the configured grid has taken
-    /// lately (at what the pass took before any has).
+    /// pass alone, each at what the tile at its place in the order has taken
+    /// lately in the configured grid (at what the pass took before any has).
     fn skipped_time(
         &self,
         tiles: &Tiles,
@@ -295,8 +296,9 @@ impl Localizer {
         match costs.is_empty() {
             false => self.priced(tiles, costs, left),
             true => {
-                let each = self.tile_cost.typical_tile().or(pass.map(|p| p.time));
-                each.unwrap_or_default() * left.len() as u32
+                let learnt = self.tile_cost.first_tiles(left.len());
+                let each_as_the_pass = pass.map(|p| p.time * left.len() as u32);
+                learnt.or(each_as_the_pass).unwrap_or_default()
             }
         }
     }
