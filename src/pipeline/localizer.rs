@@ -36,6 +36,18 @@ pub enum Tracing {
     Full,
 }
 
+/// What the units of one request have cost so far: what its time budget
+/// and its saving are priced from.
+struct Spent {
+    /// The coarse pass, when it came first.
+    pass: Option<search::budget::UnitCost>,
+    /// Each tile after it, in the order extracted.
+    tiles: Vec<search::budget::UnitCost>,
+    /// The tiles are the configured grid's, whose first tiles the
+    /// localizer has learnt.
+    configured: bool,
+}
+
 /// How a query is extracted ([`Localizer::plan`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Plan {
@@ -259,20 +271,15 @@ impl Localizer {
     /// expected to take ([`search::budget`]): after tiles, the next one,
     /// priced by the keypoints it is expected to hold (the tiles' keypoints
     /// so far shared out by their expected shares); after the coarse pass
-    /// alone, [`search::budget::TILES_TO_BEAT_THE_PASS`] tiles at what the
-    /// pass took each.
-    fn next_tiles_time(
-        &self,
-        tiles: &Tiles,
-        pass: Option<search::budget::UnitCost>,
-        costs: &[search::budget::UnitCost],
-    ) -> (Duration, u32) {
-        if costs.is_empty() {
+    /// alone, the first [`search::budget::TILES_TO_BEAT_THE_PASS`] tiles
+    /// ([`Localizer::first_tiles_time`]).
+    fn next_tiles_time(&self, tiles: &Tiles, spent: &Spent) -> (Duration, u32) {
+        if spent.tiles.is_empty() {
             let n = search::budget::TILES_TO_BEAT_THE_PASS;
-            return (pass.map_or(Duration::ZERO, |p| p.time * n), n);
+            return (self.first_tiles_time(n as usize, spent), n);
         }
         let next = &tiles.shares_left()[..1];
-        (self.priced(tiles, costs, next), 1)
+        (self.priced(tiles, &spent.tiles, next), 1)
     }
 
     /// The tiles with expected shares `left` after those of `costs` (at
@@ -282,24 +289,25 @@ impl Localizer {
         search::budget::tiles_left_time(costs, tiles.share_extracted(), left, per_keypoint)
     }
 
+    /// What the first `n` tiles are expected to take before any is timed:
+    /// in the configured grid, what they have taken lately, each place in
+    /// the order at its own mean ([`search::budget::TileCostModel::first_tiles`]);
+    /// else (another grid, or nothing learnt yet) each at what the coarse
+    /// pass took.
+    fn first_tiles_time(&self, n: usize, spent: &Spent) -> Duration {
+        let learnt = spent.configured.then(|| self.tile_cost.first_tiles(n));
+        let each_as_the_pass = spent.pass.map(|p| p.time * n as u32);
+        learnt.flatten().or(each_as_the_pass).unwrap_or_default()
+    }
+
     /// What the tiles not extracted yet would have taken: a stop's saving.
     /// After tiles, each priced by its expected keypoints; after the coarse
-    /// pass alone, each at what the tile at its place in the order has taken
-    /// lately in the configured grid (at what the pass took before any has).
-    fn skipped_time(
-        &self,
-        tiles: &Tiles,
-        pass: Option<search::budget::UnitCost>,
-        costs: &[search::budget::UnitCost],
-    ) -> Duration {
+    /// pass alone, as [`Localizer::first_tiles_time`] prices them.
+    fn skipped_time(&self, tiles: &Tiles, spent: &Spent) -> Duration {
         let left = tiles.shares_left();
-        match costs.is_empty() {
-            false => self.priced(tiles, costs, left),
-            true => {
-                let learnt = self.tile_cost.first_tiles(left.len());
-                let each_as_the_pass = pass.map(|p| p.time * left.len() as u32);
-                learnt.or(each_as_the_pass).unwrap_or_default()
-            }
+        match spent.tiles.is_empty() {
+            false => self.priced(tiles, &spent.tiles, left),
+            true => self.first_tiles_time(left.len(), spent),
         }
     }
 
@@ -381,8 +389,12 @@ impl Localizer {
         }
         let mut keypoints: Vec<Keypoint> = Vec::new();
         let mut tiles_used = 0;
-        // what the coarse pass and each tile after it cost
-        let (mut pass, mut costs) = (None, Vec::new());
+        let tiles_only = |g: TileGrid| TileGrid { coarse: false, ..g };
+        let mut spent = Spent {
+            pass: None,
+            tiles: Vec::new(),
+            configured: tiles_only(grid) == tiles_only(self.tiles),
+        };
         // what the tiles the search stopped before would have taken
         let mut skipped = None;
         loop {
@@ -393,14 +405,14 @@ impl Localizer {
                 .budget
                 .filter(|_| !search.stopped() && (1..tiles.total()).contains(&tiles.extracted()))
             {
-                let (next, n) = self.next_tiles_time(&tiles, pass, &costs);
+                let (next, n) = self.next_tiles_time(&tiles, &spent);
                 if let Err(why) = search::budget::next_tiles_fit(budget, started.elapsed(), next, n)
                 {
                     search.end(search::StopKind::Budget, why);
                 }
             }
             if search.stopped() && skipped.is_none() {
-                skipped = Some(self.skipped_time(&tiles, pass, &costs));
+                skipped = Some(self.skipped_time(&tiles, &spent));
             }
             if search.stopped() && full.as_ref().is_none_or(Search::stopped) {
                 break;
@@ -449,14 +461,13 @@ impl Localizer {
                 keypoints: tile.len(),
             };
             match step.coarse {
-                true => pass = Some(cost),
-                false => costs.push(cost),
+                true => spent.pass = Some(cost),
+                false => spent.tiles.push(cost),
             }
         }
         // what the tiles of the configured grid cost (not a grid asked for)
-        let tiles_only = |g: TileGrid| TileGrid { coarse: false, ..g };
-        if tiles_only(grid) == tiles_only(self.tiles) {
-            self.tile_cost.record(&costs);
+        if spent.configured {
+            self.tile_cost.record(&spent.tiles);
         }
         let extraction = Extraction {
             tiles_extracted: tiles_used,
