@@ -271,12 +271,13 @@ impl Localizer {
     /// expected to take ([`search::budget`]): after tiles, the next one,
     /// priced by the keypoints it is expected to hold (the tiles' keypoints
     /// so far shared out by their expected shares); after the coarse pass
-    /// alone, the first [`search::budget::TILES_TO_BEAT_THE_PASS`] tiles
-    /// ([`Localizer::first_tiles_time`]).
+    /// alone, [`search::budget::TILES_TO_BEAT_THE_PASS`] tiles at what the
+    /// pass took each (pricing them as [`Localizer::first_tiles_time`] does
+    /// answered no better: docs/service.md, "A time budget").
     fn next_tiles_time(&self, tiles: &Tiles, spent: &Spent) -> (Duration, u32) {
         if spent.tiles.is_empty() {
             let n = search::budget::TILES_TO_BEAT_THE_PASS;
-            return (self.first_tiles_time(n as usize, spent), n);
+            return (spent.pass.map_or(Duration::ZERO, |p| p.time * n), n);
         }
         let next = &tiles.shares_left()[..1];
         (self.priced(tiles, &spent.tiles, next), 1)

@@ -117,10 +117,9 @@ pub fn slope_sums(tiles: &[UnitCost]) -> (f64, f64) {
 /// of it at full size) answered worse on gardens-point, three better
 /// (docs/service.md, "A time budget"). A budget expected to hold fewer
 /// tiles (at what the first tiles of a request have taken lately) starts
-/// with the pass, whatever
-/// the plan ([`pass_first`]); after a pass that did not end the search, the
-/// search starts over on the tiles only when this many are expected to fit
-/// (each priced at what the pass took).
+/// with the pass, whatever the plan ([`pass_first`]); after a pass that did
+/// not end the search, the search starts over on the tiles only when this
+/// many are expected to fit (each priced at what the pass took).
 pub const TILES_TO_BEAT_THE_PASS: u32 = 3;
 
 /// Whether a search under `budget` should start with the coarse pass, when
