@@ -45,6 +45,7 @@ pub const BUILD_INFO: &str = "bowloc_build_info";
 pub const SEQUENCES: &str = "bowloc_sequences_live";
 pub const PLAN_COST: &str = "bowloc_extraction_plan_typical_seconds";
 pub const KEYPOINT_COST: &str = "bowloc_tile_keypoint_seconds";
+pub const FIRST_TILES_COST: &str = "bowloc_tile_first_tiles_seconds";
 pub const SEQUENCE_EVICTIONS: &str = "bowloc_sequence_evictions_total";
 pub const SEQUENCE_RESTARTS: &str = "bowloc_sequence_restarts_total";
 
@@ -179,6 +180,11 @@ fn describe() {
         KEYPOINT_COST,
         Unit::Seconds,
         "What one keypoint adds to a tile's time (extraction, quantization, votes, checks), as the service has learnt it from the requests served; a time budget prices the next tile with it."
+    );
+    describe_gauge!(
+        FIRST_TILES_COST,
+        Unit::Seconds,
+        "What the first three tiles of a request in the configured grid have taken lately together, each place in the order at its own mean; a time budget under it starts with the coarse pass."
     );
     describe_counter!(
         SEQUENCE_EVICTIONS,
@@ -345,9 +351,14 @@ pub fn coarse_choice(choice: &crate::features::CoarseChoice) {
     }
 }
 
-/// What a keypoint costs a tile, as the localizer has learnt it.
-pub fn keypoint_cost(cost: Duration) {
-    gauge!(KEYPOINT_COST).set(cost.as_secs_f64());
+/// What tiles cost, as the localizer has learnt it: a keypoint, and the
+/// first tiles a time budget plans on.
+pub fn tile_cost(cost: &crate::search::budget::TileCostModel) {
+    gauge!(KEYPOINT_COST).set(cost.per_keypoint().as_secs_f64());
+    let first = crate::search::budget::TILES_TO_BEAT_THE_PASS as usize;
+    if let Some(first) = cost.first_tiles(first) {
+        gauge!(FIRST_TILES_COST).set(first.as_secs_f64());
+    }
 }
 
 /// The worker pool's size and occupancy.

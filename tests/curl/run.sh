@@ -496,6 +496,8 @@ check "metrics is Prometheus text" sh -c "curl -s -D - -o /dev/null '$BASE/metri
 check "map gauge holds the map size" grep -qx 'bowloc_map_images 40' "$TMP/metrics.txt"
 check "the learnt cost of a keypoint is exported, above 0 and under a millisecond" \
   awk '$1 == "bowloc_tile_keypoint_seconds" && $2 > 0 && $2 < 0.001 { found = 1 } END { exit !found }' "$TMP/metrics.txt"
+check "what the first three tiles take is exported, above 0 and under a second" \
+  awk '$1 == "bowloc_tile_first_tiles_seconds" && $2 > 0 && $2 < 1 { found = 1 } END { exit !found }' "$TMP/metrics.txt"
 
 # --- graceful shutdown under load --------------------------------------------
 # Six requests upload at 50 kB/s (about a second each), then compete for the

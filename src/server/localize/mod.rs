@@ -168,7 +168,7 @@ pub async fn localize(
     if let Some(choice) = &localizer.coarse_choice {
         super::metrics::coarse_choice(choice);
     }
-    super::metrics::keypoint_cost(localizer.tile_cost().per_keypoint());
+    super::metrics::tile_cost(localizer.tile_cost());
     let mut answer = answer;
     if let Some(frame) = held {
         frame.finish(&mut answer, &*snapshot, top_n);
