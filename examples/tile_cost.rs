@@ -33,7 +33,7 @@
 
 use bowloc::eval::cache;
 use bowloc::features::TileGrid;
-use bowloc::search::budget::{UnitCost, slope_sums, tiles_left_time};
+use bowloc::search::budget::{TILES_TO_BEAT_THE_PASS, UnitCost, slope_sums, tiles_left_time};
 use std::time::Duration;
 
 /// One tile as the cache timed it.
@@ -144,24 +144,27 @@ fn main() -> anyhow::Result<()> {
     );
     let mean = |done: &[TileRow]| done.iter().map(|t| t.ms).sum::<f64>() / done.len() as f64;
     let width = tiles.iter().map(Vec::len).max().unwrap_or(0);
-    let at: Vec<String> = (0..width)
+    let at: Vec<f64> = (0..width)
         .map(|k| {
             let times: Vec<f64> = tiles
                 .iter()
                 .filter_map(|t| t.get(k))
                 .map(|t| t.ms)
                 .collect();
-            format!(
-                "{:.2}",
-                times.iter().sum::<f64>() / times.len().max(1) as f64
-            )
+            times.iter().sum::<f64>() / times.len().max(1) as f64
         })
         .collect();
     let all: Vec<TileRow> = tiles.iter().flatten().copied().collect();
+    let first = TILES_TO_BEAT_THE_PASS as usize;
     println!(
-        "mean ms of the 1st, 2nd, … tile: {}; of any tile: {:.2}",
-        at.join(", "),
-        mean(&all)
+        "mean ms of the 1st, 2nd, … tile: {}; of any tile: {:.2}; the first {first} together: {:.2}, {first} at the mean of any: {:.2}",
+        at.iter()
+            .map(|ms| format!("{ms:.2}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        mean(&all),
+        at.iter().take(first).sum::<f64>(),
+        first as f64 * mean(&all)
     );
     report("mean of the tiles so far", &tiles, 1, &|d, _| mean(d));
     let (xy, xx) = tiles

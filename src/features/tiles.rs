@@ -372,12 +372,6 @@ impl Tiles {
         self.next.checked_sub(1).map_or(0.0, |k| self.shares[k])
     }
 
-    /// The expected share of the image's keypoints in the unit extracted
-    /// next, as [`Tiles::share_of_last`] counts it (`None`: none is left).
-    pub fn share_of_next(&self) -> Option<f64> {
-        self.shares_left().first().copied()
-    }
-
     /// The expected shares of the units not extracted yet, in the order
     /// they would come, as [`Tiles::share_of_last`] counts them.
     pub fn shares_left(&self) -> &[f64] {

@@ -48,6 +48,13 @@ struct Spent {
     configured: bool,
 }
 
+impl Spent {
+    /// `n` tiles at what the coarse pass took each (`None`: no pass).
+    fn each_as_the_pass(&self, n: u32) -> Option<Duration> {
+        self.pass.map(|p| p.time * n)
+    }
+}
+
 /// How a query is extracted ([`Localizer::plan`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Plan {
@@ -277,7 +284,7 @@ impl Localizer {
     fn next_tiles_time(&self, tiles: &Tiles, spent: &Spent) -> (Duration, u32) {
         if spent.tiles.is_empty() {
             let n = search::budget::TILES_TO_BEAT_THE_PASS;
-            return (spent.pass.map_or(Duration::ZERO, |p| p.time * n), n);
+            return (spent.each_as_the_pass(n).unwrap_or_default(), n);
         }
         let next = &tiles.shares_left()[..1];
         (self.priced(tiles, &spent.tiles, next), 1)
@@ -297,7 +304,7 @@ impl Localizer {
     /// pass took.
     fn first_tiles_time(&self, n: usize, spent: &Spent) -> Duration {
         let learnt = spent.configured.then(|| self.tile_cost.first_tiles(n));
-        let each_as_the_pass = spent.pass.map(|p| p.time * n as u32);
+        let each_as_the_pass = spent.each_as_the_pass(n as u32);
         learnt.flatten().or(each_as_the_pass).unwrap_or_default()
     }
 

@@ -63,19 +63,14 @@ pub fn next_tile_time(done: &[UnitCost], next_keypoints: f64, per_keypoint: Dura
     Duration::from_secs_f64(apart.max(0.0) + q * next_keypoints.max(0.0))
 }
 
-/// The keypoints the next tile is expected to hold: the `seen` keypoints
-/// of the `done` tiles so far shared out by expected shares (`share_done`
-/// of the image's, `share_next` the next tile's; by corners, or area), or
-/// their mean per tile when the shares say nothing.
-pub fn expected_keypoints(
-    seen: usize,
-    done: usize,
-    share_done: f64,
-    share_next: Option<f64>,
-) -> f64 {
-    match share_next {
-        Some(next) if share_done > 0.0 => seen as f64 * next / share_done,
-        _ => seen as f64 / done.max(1) as f64,
+/// The keypoints a tile is expected to hold: the `seen` keypoints of the
+/// `done` tiles so far shared out by expected shares (`share_done` of the
+/// image's, `share` the tile's; by corners, or area), or their mean per
+/// tile when the tiles done were expected to hold none.
+pub fn expected_keypoints(seen: usize, done: usize, share_done: f64, share: f64) -> f64 {
+    match share_done > 0.0 {
+        true => seen as f64 * share / share_done,
+        false => seen as f64 / done.max(1) as f64,
     }
 }
 
@@ -93,7 +88,7 @@ pub fn tiles_left_time(
     let seen = done.iter().map(|c| c.keypoints).sum();
     left.iter()
         .map(|&share| {
-            let keypoints = expected_keypoints(seen, done.len(), share_done, Some(share));
+            let keypoints = expected_keypoints(seen, done.len(), share_done, share);
             next_tile_time(done, keypoints, per_keypoint)
         })
         .sum()
@@ -160,7 +155,8 @@ pub fn next_tiles_fit(
 /// keypoints among the tiles of one request (same grid, same image: they
 /// differ in little else), and what the first, second, … tile of a request
 /// takes (tiles come richest first, so each place in the order has its own
-/// mean: on gardens-point 18.0, 14.8, 12.5 and 10.7 ms, docs/service.md).
+/// mean: on gardens-point 18.0, 14.8, 12.5 and 10.7 ms of extraction on a
+/// 2-vCPU Intel Xeon, docs/service.md).
 /// Both are summed over the recent requests (each request's weight fades by
 /// [`TileCostModel::FADE`] with every one after it, so the figures follow the
 /// machine's speed); the slope starts from [`TileCostModel::PRIOR`].

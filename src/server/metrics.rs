@@ -184,7 +184,10 @@ fn describe() {
     describe_gauge!(
         FIRST_TILES_COST,
         Unit::Seconds,
-        "What the first three tiles of a request in the configured grid have taken lately together, each place in the order at its own mean; a time budget under it starts with the coarse pass."
+        format!(
+            "What the first {} tiles of a request in the configured grid have taken lately together, each place in the order at its own mean; a time budget under it starts with the coarse pass.",
+            crate::search::budget::TILES_TO_BEAT_THE_PASS
+        )
     );
     describe_counter!(
         SEQUENCE_EVICTIONS,
