@@ -345,6 +345,12 @@ pub struct TileUse {
     /// keypoint has cost this server lately; after the coarse pass alone,
     /// each at what the tile at its place in the order has taken lately.
     pub saved_ms: f64,
+    /// Tiles extracted ahead of their turn on a core that would otherwise
+    /// idle, and of those the one the search stopped before, if any (not
+    /// sent: they follow the server's load; `/metrics` counts them).
+    #[serde(skip)]
+    #[schema(ignore)]
+    pub ahead: (usize, bool),
 }
 
 fn display<T: std::fmt::Display, S: serde::Serializer>(v: &T, s: S) -> Result<S::Ok, S::Error> {
@@ -364,6 +370,8 @@ pub struct Extraction {
     pub complete: bool,
     /// What the tiles not extracted were expected to take.
     pub skipped: Duration,
+    /// [`TileUse::ahead`].
+    pub ahead: (usize, bool),
 }
 
 /// The stopping rule the search ran with.
@@ -532,6 +540,7 @@ impl Localization {
                 grid: extraction.grid,
                 order: extraction.tile_order,
                 saved_ms: ms(extraction.skipped),
+                ahead: extraction.ahead,
             },
             rule: rule.into(),
             stop: outcome.stop,

@@ -460,6 +460,90 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
     );
 }
 
+/// A spare core extracts the next tile together with the one after it
+/// (`server.tiles_ahead`): the features, the search and its answer are the
+/// same as one tile at a time; a search that stops with a tile extracted
+/// ahead says so, and a time budget keeps one tile at a time.
+#[test]
+fn tiles_extracted_ahead_change_nothing_in_the_answer() {
+    use bowloc::features::{GrayImage, TileGrid, Tiles, decode_file};
+    use bowloc::search::{SpareCore, TileOrder};
+    let real = common::real_map("rtabmap-loop", 1000);
+    let grid: TileGrid = "2x2+24".parse().unwrap();
+    let config = ExtractConfig::default();
+    for q in real.data.queries.iter().step_by(7) {
+        let image: GrayImage = decode_file(&q.path, DecodeLimits::default(), 640).unwrap();
+        let order = Some((TileOrder::default(), 3));
+        let mut one = Tiles::new(&image, &config, grid, order).unwrap();
+        let mut two = Tiles::new(&image, &config, grid, order).unwrap();
+        two.extract_ahead(true);
+        while let Some(a) = one.next_tile() {
+            let b = two.next_tile().unwrap().unwrap();
+            let a = a.unwrap();
+            assert_eq!(a.keypoints, b.keypoints, "{}", q.name);
+            assert_eq!(a.descriptors, b.descriptors, "{}", q.name);
+            assert!(two.last_time() > std::time::Duration::ZERO);
+            assert_eq!(one.extracted(), two.extracted());
+        }
+        assert!(two.next_tile().is_none());
+        // four tiles: the second and the fourth came ahead, both used
+        assert_eq!(two.ahead(), (2, false), "{}", q.name);
+        assert_eq!(one.ahead(), (0, false), "{}", q.name);
+    }
+
+    let mut localizer = real.localizer(true);
+    localizer.tiles = grid;
+    let alone = SearchOptions {
+        rule: RuleSpec::new("place-z", Some(2.25)).unwrap(),
+        min_features: 20,
+        seed: 5,
+        ..Default::default()
+    };
+    let spare = SearchOptions {
+        spare_core: Some(SpareCore::always()),
+        ..alone.clone()
+    };
+    let budget = SearchOptions {
+        budget: Some(std::time::Duration::from_secs(600)),
+        ..spare.clone()
+    };
+    let ids =
+        |a: &bowloc::report::Localization| a.candidates.iter().map(|c| c.id).collect::<Vec<_>>();
+    let (mut stopped_ahead, mut went_ahead) = (0, 0);
+    for q in &real.data.queries {
+        let a = localizer
+            .localize_file(&q.path, &alone, Some(grid))
+            .unwrap();
+        let b = localizer
+            .localize_file(&q.path, &spare, Some(grid))
+            .unwrap();
+        assert_eq!(ids(&a), ids(&b), "{}", q.name);
+        assert_eq!(a.features.used, b.features.used, "{}", q.name);
+        assert_eq!(a.tiles.extracted, b.tiles.extracted, "{}", q.name);
+        assert_eq!(
+            (a.stop.kind, a.verified),
+            (b.stop.kind, b.verified),
+            "{}",
+            q.name
+        );
+        assert_eq!(a.tiles.ahead, (0, false), "{}", q.name);
+        // tiles come in pairs: one ahead per pair begun
+        assert_eq!(b.tiles.ahead.0, b.tiles.extracted.div_ceil(2), "{}", q.name);
+        assert_eq!(b.tiles.ahead.1, b.tiles.extracted % 2 == 1, "{}", q.name);
+        went_ahead += usize::from(b.tiles.ahead.0 > 0);
+        stopped_ahead += usize::from(b.tiles.ahead.1);
+        let c = localizer
+            .localize_file(&q.path, &budget, Some(grid))
+            .unwrap();
+        assert_eq!(c.tiles.ahead, (0, false), "{}", q.name);
+        assert_eq!(ids(&a), ids(&c), "{}", q.name);
+    }
+    assert_eq!(went_ahead, real.data.queries.len());
+    // some searches stop after the first tile of a pair, with the other
+    // extracted ahead for nothing
+    assert!(stopped_ahead > 0, "{stopped_ahead}");
+}
+
 /// Every streaming plan's tiles find (almost) the keypoints of the whole
 /// image: their margins lose or duplicate at most a few percent; a coarse
 /// pass comes first, and finds a good share of them on its own.

@@ -8,6 +8,7 @@ use ndarray::Array2;
 use opencv::core::{KeyPoint, Mat, Ptr, Rect, Size, Vector, no_array};
 use opencv::features2d::SIFT;
 use opencv::prelude::*;
+use std::time::{Duration, Instant};
 
 /// One row per keypoint, 128 columns.
 pub type Descriptors = Array2<f32>;
@@ -41,6 +42,10 @@ impl Features {
 pub struct Frame {
     mat: Mat,
     sift: Ptr<SIFT>,
+    /// A second detector, for a region extracted on a second thread
+    /// ([`Frame::detect_two`]); made on first use.
+    second: Option<Ptr<SIFT>>,
+    sift_config: super::SiftParams,
     rootsift: bool,
 }
 
@@ -53,17 +58,11 @@ impl Frame {
             [image.width(), image.height()],
             config.max_side,
         )?;
-        let p = &config.sift;
-        let sift = SIFT::create(
-            0,
-            p.octave_layers as i32,
-            p.contrast_threshold,
-            p.edge_threshold,
-            p.sigma,
-        )?;
         Ok(Self {
             mat,
-            sift,
+            sift: detector(&config.sift)?,
+            second: None,
+            sift_config: config.sift.clone(),
             rootsift: config.rootsift,
         })
     }
@@ -85,7 +84,7 @@ impl Frame {
 
     /// Width and height of the extraction frame.
     pub fn size(&self) -> (u32, u32) {
-        (self.mat.cols().max(0) as u32, self.mat.rows().max(0) as u32)
+        frame_size(&self.mat)
     }
 
     /// Detect and describe inside `region` (x, y, width, height, clipped to
@@ -99,41 +98,51 @@ impl Frame {
         core: (u32, u32, u32, u32),
         cap: usize,
     ) -> Result<Features, FeatureError> {
-        let (fw, fh) = self.size();
-        let x0 = region.0.min(fw);
-        let y0 = region.1.min(fh);
-        let w = region.2.min(fw - x0);
-        let h = region.3.min(fh - y0);
-        if w < 2 || h < 2 {
-            return Ok(Features::empty());
+        let r = Region { region, core, cap };
+        detect_in(&self.mat, &mut self.sift, self.rootsift, r)
+    }
+
+    /// [`Frame::detect`] of two regions at once, `b`'s on a second thread
+    /// with a detector of its own: the same features as one after the
+    /// other, each with the time its own extraction took, or its own error.
+    pub fn detect_two(&mut self, a: Region, b: Region) -> [Result<Timed, FeatureError>; 2] {
+        if self.second.is_none() {
+            match detector(&self.sift_config) {
+                Ok(d) => self.second = Some(d),
+                Err(e) => return [self.detect_timed(a), Err(e)],
+            }
         }
-        let whole = (x0, y0, w, h) == (0, 0, fw, fh);
-        let roi = match whole {
-            true => None,
-            false => Some(
-                Mat::roi(
-                    &self.mat,
-                    Rect::new(x0 as i32, y0 as i32, w as i32, h as i32),
-                )?
-                .try_clone()?,
-            ),
+        let Self {
+            mat,
+            sift,
+            second: Some(second),
+            rootsift,
+            ..
+        } = self
+        else {
+            unreachable!("made above")
         };
-        let (cx0, cy0) = (core.0 as f32, core.1 as f32);
-        let (cx1, cy1) = (cx0 + core.2 as f32, cy0 + core.3 as f32);
-        let place = |k: &KeyPoint| {
-            let p = k.pt();
-            let kp = Keypoint {
-                x: p.x + x0 as f32,
-                y: p.y + y0 as f32,
-                size: k.size(),
-                angle: k.angle(),
-                response: k.response(),
-            };
-            let inside = kp.x >= cx0 && kp.x < cx1 && kp.y >= cy0 && kp.y < cy1;
-            inside.then_some(kp)
+        let (mat, rootsift) = (&*mat, *rootsift);
+        let timed = |sift: &mut Ptr<SIFT>, r: Region| {
+            let t = Instant::now();
+            detect_in(mat, sift, rootsift, r).map(|f| (f, t.elapsed()))
         };
-        let input = roi.as_ref().unwrap_or(&self.mat);
-        describe(&mut self.sift, input, place, cap, self.rootsift)
+        let (first, other) = std::thread::scope(|s| {
+            let other = s.spawn(|| timed(second, b));
+            (timed(sift, a), other.join())
+        });
+        let other = other.unwrap_or_else(|_| {
+            Err(FeatureError::OpenCv(
+                "the second extraction thread failed".into(),
+            ))
+        });
+        [first, other]
+    }
+
+    /// [`Frame::detect`] of one region, with the time it took.
+    fn detect_timed(&mut self, r: Region) -> Result<Timed, FeatureError> {
+        let t = Instant::now();
+        detect_in(&self.mat, &mut self.sift, self.rootsift, r).map(|f| (f, t.elapsed()))
     }
 
     /// Detect and describe on the whole frame downscaled to half its size:
@@ -167,6 +176,73 @@ impl Frame {
         };
         describe(&mut self.sift, &half, place, cap, self.rootsift)
     }
+}
+
+/// Features with the time their extraction took.
+pub type Timed = (Features, Duration);
+
+/// One region to extract ([`Frame::detect`]'s arguments).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Region {
+    pub region: (u32, u32, u32, u32),
+    pub core: (u32, u32, u32, u32),
+    pub cap: usize,
+}
+
+/// A SIFT detector with the configured parameters.
+fn detector(p: &super::SiftParams) -> Result<Ptr<SIFT>, FeatureError> {
+    Ok(SIFT::create(
+        0,
+        p.octave_layers as i32,
+        p.contrast_threshold,
+        p.edge_threshold,
+        p.sigma,
+    )?)
+}
+
+/// Width and height of a frame.
+fn frame_size(mat: &Mat) -> (u32, u32) {
+    (mat.cols().max(0) as u32, mat.rows().max(0) as u32)
+}
+
+/// [`Frame::detect`] on `mat` with the detector `sift`.
+fn detect_in(
+    mat: &Mat,
+    sift: &mut Ptr<SIFT>,
+    rootsift: bool,
+    Region { region, core, cap }: Region,
+) -> Result<Features, FeatureError> {
+    let (fw, fh) = frame_size(mat);
+    let x0 = region.0.min(fw);
+    let y0 = region.1.min(fh);
+    let w = region.2.min(fw - x0);
+    let h = region.3.min(fh - y0);
+    if w < 2 || h < 2 {
+        return Ok(Features::empty());
+    }
+    let whole = (x0, y0, w, h) == (0, 0, fw, fh);
+    let roi = match whole {
+        true => None,
+        false => {
+            Some(Mat::roi(mat, Rect::new(x0 as i32, y0 as i32, w as i32, h as i32))?.try_clone()?)
+        }
+    };
+    let (cx0, cy0) = (core.0 as f32, core.1 as f32);
+    let (cx1, cy1) = (cx0 + core.2 as f32, cy0 + core.3 as f32);
+    let place = |k: &KeyPoint| {
+        let p = k.pt();
+        let kp = Keypoint {
+            x: p.x + x0 as f32,
+            y: p.y + y0 as f32,
+            size: k.size(),
+            angle: k.angle(),
+            response: k.response(),
+        };
+        let inside = kp.x >= cx0 && kp.x < cx1 && kp.y >= cy0 && kp.y < cy1;
+        inside.then_some(kp)
+    };
+    let input = roi.as_ref().unwrap_or(mat);
+    describe(sift, input, place, cap, rootsift)
 }
 
 /// Run the detector on `input`, map each keypoint into the frame with

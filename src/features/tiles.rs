@@ -12,9 +12,10 @@
 //! ([`crate::search::Search::feed_tile`]): an answer not taken on the
 //! coarse pass is the tiles alone's.
 
-use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage};
+use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage, Region, Timed};
 use crate::search::permute::{self, TileGuide, TileOrder};
 use serde::{Deserialize, Serialize};
+use std::time::{Duration, Instant};
 
 /// How a query is cut into tiles.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -247,6 +248,15 @@ pub struct Tiles {
     next: usize,
     /// Keypoints the image may keep (0 = all), shared out over the units.
     cap: usize,
+    /// Extract two tiles at a time ([`Tiles::extract_ahead`]).
+    two_at_a_time: bool,
+    /// A unit extracted ahead, by its place in the order, with the time it
+    /// took (or its error), waiting its turn.
+    ahead: Option<(usize, Result<Timed, FeatureError>)>,
+    /// What the unit handed out last took to extract, on its own thread.
+    last_time: Duration,
+    /// Tiles extracted ahead so far.
+    extracted_ahead: usize,
 }
 
 impl Tiles {
@@ -318,6 +328,10 @@ impl Tiles {
             corners,
             next: 0,
             cap,
+            two_at_a_time: false,
+            ahead: None,
+            last_time: Duration::ZERO,
+            extracted_ahead: 0,
         })
     }
 
@@ -378,25 +392,85 @@ impl Tiles {
         &self.shares[self.next.min(self.shares.len())..]
     }
 
+    /// From now on (`true`) extract the next tile together with the one
+    /// after it, on a second thread, keeping that one for the next call; or
+    /// (`false`) one tile at a time. The features are the same either way:
+    /// two at a time only uses a core that would otherwise idle, and a tile
+    /// extracted ahead of a stop is never handed out. A coarse pass is
+    /// always extracted alone.
+    pub fn extract_ahead(&mut self, two_at_a_time: bool) {
+        self.two_at_a_time = two_at_a_time;
+    }
+
+    /// Tiles extracted ahead so far, and whether one of them waits, not
+    /// handed out (yet).
+    pub fn ahead(&self) -> (usize, bool) {
+        (self.extracted_ahead, self.ahead.is_some())
+    }
+
+    /// What the unit handed out last took to extract on its own thread
+    /// (zero before any): with two at a time, not the wait for it.
+    pub fn last_time(&self) -> Duration {
+        self.last_time
+    }
+
     /// Extract the next unit: its features in frame coordinates.
     pub fn next_tile(&mut self) -> Option<Result<Features, FeatureError>> {
-        let &unit = self.order.get(self.next)?;
+        let k = self.next;
+        let &unit = self.order.get(k)?;
         self.next += 1;
-        let cap = self.tile_cap(self.next - 1);
-        Some(match unit {
-            Unit::Coarse => self.frame.detect_halved(cap),
-            Unit::Tile(tile) => {
-                let core = self.cores[tile];
-                let m = self.margin;
-                let region = (
-                    core.0.saturating_sub(m),
-                    core.1.saturating_sub(m),
-                    core.2 + m + core.0.min(m),
-                    core.3 + m + core.1.min(m),
+        if let Some((at, extracted)) = self.ahead.take()
+            && at == k
+        {
+            return Some(self.handed_out(extracted));
+        }
+        let started = Instant::now();
+        let cap = self.tile_cap(k);
+        let features = match (unit, self.order.get(k + 1)) {
+            (Unit::Coarse, _) => self.frame.detect_halved(cap),
+            (Unit::Tile(tile), Some(&Unit::Tile(after))) if self.two_at_a_time => {
+                let (a, b) = (
+                    self.region(tile, cap),
+                    self.region(after, self.tile_cap(k + 1)),
                 );
-                self.frame.detect(region, core, cap)
+                let [first, next] = self.frame.detect_two(a, b);
+                self.ahead = Some((k + 1, next));
+                self.extracted_ahead += 1;
+                return Some(self.handed_out(first));
             }
+            (Unit::Tile(tile), _) => {
+                let r = self.region(tile, cap);
+                self.frame.detect(r.region, r.core, r.cap)
+            }
+        };
+        self.last_time = started.elapsed();
+        Some(features)
+    }
+
+    /// Hand out a unit extracted with its time.
+    fn handed_out(
+        &mut self,
+        extracted: Result<Timed, FeatureError>,
+    ) -> Result<Features, FeatureError> {
+        extracted.map(|(features, took)| {
+            self.last_time = took;
+            features
         })
+    }
+
+    /// Tile `tile`'s region: its core grown by the margin (clipped at the
+    /// frame's top and left; [`Frame::detect`] clips the rest), keeping at
+    /// most `cap` keypoints.
+    fn region(&self, tile: usize, cap: usize) -> Region {
+        let core = self.cores[tile];
+        let m = self.margin;
+        let region = (
+            core.0.saturating_sub(m),
+            core.1.saturating_sub(m),
+            core.2 + m + core.0.min(m),
+            core.3 + m + core.1.min(m),
+        );
+        Region { region, core, cap }
     }
 
     /// The cap of the k-th unit extracted: a coarse pass, the image's whole;

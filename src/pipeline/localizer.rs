@@ -425,6 +425,10 @@ impl Localizer {
             if search.stopped() && full.as_ref().is_none_or(Search::stopped) {
                 break;
             }
+            // a core that would idle extracts the tile after this one
+            let ahead =
+                options.budget.is_none() && options.spare_core.as_ref().is_some_and(|c| c.now());
+            tiles.extract_ahead(ahead);
             let t = Instant::now();
             let Some(tile) = tiles.next_tile() else { break };
             let tile = tile?;
@@ -465,7 +469,8 @@ impl Localizer {
             let fed = Instant::now();
             search.feed_tile(tile.len(), step, quantize, Some(&mut check));
             let cost = search::budget::UnitCost {
-                time: took + fed.elapsed(),
+                // the tile's own extraction, not the wait for it
+                time: tiles.last_time() + fed.elapsed(),
                 keypoints: tile.len(),
             };
             match step.coarse {
@@ -485,6 +490,7 @@ impl Localizer {
             expected_features: search.tally().total_or_estimate(),
             complete: tiles_used == tiles.total(),
             skipped: skipped.unwrap_or_default(),
+            ahead: tiles.ahead(),
         };
         let edge = EdgeTimings {
             decode: decoded - started,

@@ -92,6 +92,37 @@ pub struct SearchOptions {
     /// features cost only their votes, and verification finds more inliers
     /// with them.
     pub finish_tile: bool,
+    /// Whether a core would idle now, asked before each tile of a streamed
+    /// query without a budget: when it would, the next tile is extracted
+    /// together with the one after it, on that core
+    /// ([`crate::features::Tiles::extract_ahead`]). `None`: one at a time.
+    pub spare_core: Option<SpareCore>,
+}
+
+/// Whether a core would idle now: the front end's view of its own load (the
+/// service's, whether fewer jobs are admitted than there are cores).
+#[derive(Clone)]
+pub struct SpareCore(Arc<dyn Fn() -> bool + Send + Sync>);
+
+impl SpareCore {
+    pub fn new(now: impl Fn() -> bool + Send + Sync + 'static) -> Self {
+        Self(Arc::new(now))
+    }
+
+    /// A core that is always spare (a command-line query alone on its machine).
+    pub fn always() -> Self {
+        Self::new(|| true)
+    }
+
+    pub fn now(&self) -> bool {
+        (self.0)()
+    }
+}
+
+impl std::fmt::Debug for SpareCore {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "SpareCore(now: {})", self.now())
+    }
 }
 
 impl Default for SearchOptions {
@@ -111,6 +142,7 @@ impl Default for SearchOptions {
             place_window: Self::PLACE_WINDOW,
             tile_order: TileOrder::default(),
             finish_tile: false,
+            spare_core: None,
         }
     }
 }

@@ -6,7 +6,7 @@
 
 use crate::geometry::verify::VerifyParams;
 use crate::quantize::QuantizerKind;
-use crate::search::{RuleSpec, SearchOptions};
+use crate::search::{RuleSpec, SearchOptions, SpareCore};
 use crate::sequence::{Motion, SequenceModel, TopologyKind};
 use figment::Figment;
 use figment::providers::{Env, Format, Serialized, Toml};
@@ -176,6 +176,9 @@ pub struct ServerConfig {
     pub workers: usize,
     /// OpenCV threads each worker's SIFT extraction may fan out to.
     pub opencv_threads: usize,
+    /// While a core would idle, a streamed query extracts its next tile
+    /// together with the one after it, on that core.
+    pub tiles_ahead: bool,
     pub log_format: LogFormat,
     /// Connections open at once; beyond, new ones wait in the listen backlog.
     pub max_connections: usize,
@@ -294,6 +297,7 @@ impl Default for ServerConfig {
             listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
             workers: 0,
             opencv_threads: 1,
+            tiles_ahead: true,
             log_format: LogFormat::Human,
             max_connections: 256,
             header_timeout_ms: 10_000,
@@ -683,6 +687,20 @@ impl Config {
     }
 
     /// Worker threads: the configured count, or one per core.
+    /// Whether a core would idle now, when `admitted` jobs run or wait on
+    /// the pool: each takes `opencv_threads` of the machine's cores. `None`
+    /// when `server.tiles_ahead` is off.
+    pub fn spare_core(
+        &self,
+        admitted: impl Fn() -> usize + Send + Sync + 'static,
+    ) -> Option<SpareCore> {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let each = self.server.opencv_threads.max(1);
+        self.server
+            .tiles_ahead
+            .then(|| SpareCore::new(move || admitted() * each < cores))
+    }
+
     pub fn worker_count(&self) -> usize {
         match self.server.workers {
             0 => std::thread::available_parallelism().map_or(1, |n| n.get()),

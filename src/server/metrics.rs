@@ -29,6 +29,7 @@ pub const RATIO_USED: &str = "bowloc_localize_features_used_ratio";
 pub const QUERY_FEATURES: &str = "bowloc_localize_query_features";
 pub const TILES_RATIO: &str = "bowloc_localize_tiles_extracted_ratio";
 pub const EXTRACTION_SAVED: &str = "bowloc_localize_extraction_saved_seconds";
+pub const TILES_AHEAD: &str = "bowloc_localize_tiles_ahead_total";
 pub const STOPS: &str = "bowloc_localize_stops_total";
 pub const VERIFY_DURATION: &str = "bowloc_verify_duration_seconds";
 pub const VERIFY_INLIERS: &str = "bowloc_verify_top_inliers";
@@ -134,6 +135,10 @@ fn describe() {
         EXTRACTION_SAVED,
         Unit::Seconds,
         "Extraction time saved by stopping before the last tile: what the tiles left were expected to take (the answer's tiles.saved_ms)."
+    );
+    describe_counter!(
+        TILES_AHEAD,
+        "Tiles extracted ahead of their turn on a core that would otherwise idle (server.tiles_ahead), by whether the search used them (used=false: it stopped before)."
     );
     describe_counter!(
         STOPS,
@@ -334,6 +339,11 @@ pub fn localized(answer: &Localization) {
     if tiles.total > 0 && tiles.extracted > 0 {
         histogram!(TILES_RATIO).record(tiles.extracted as f64 / tiles.total as f64);
         histogram!(EXTRACTION_SAVED).record(tiles.saved_ms / 1e3);
+    }
+    let (ahead, unused) = (tiles.ahead.0 as u64, u64::from(tiles.ahead.1));
+    if ahead > 0 {
+        counter!(TILES_AHEAD, "used" => "true").increment(ahead - unused);
+        counter!(TILES_AHEAD, "used" => "false").increment(unused);
     }
     counter!(STOPS, "kind" => answer.stop.kind.name()).increment(1);
     if let Some(verified) = answer.verified {

@@ -112,6 +112,8 @@ impl AppState {
                 tile_order: s.tile_order,
                 // set per request, when its answer is verified
                 finish_tile: false,
+                // set per request, from the pool's load
+                spare_core: None,
             },
             max_top_n: config.limits.max_top_n,
         };

@@ -133,6 +133,8 @@ pub async fn localize(
     let verify = params.verify(state.config.verify.enabled)?;
     let tracing = params.tracing()?;
     options.deadline = Some(deadline);
+    let pool = state.pool.clone();
+    options.spare_core = state.config.spare_core(move || pool.admitted());
     let model = state.config.sequence.model();
     let allowed = match near {
         Some(n) => Some(n.images(&*snapshot).ok_or_else(|| {
