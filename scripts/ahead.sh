@@ -1,0 +1,91 @@
+#!/usr/bin/env bash
+# What extracting tiles ahead on a spare core (`server.tiles_ahead`) does to
+# latency and throughput, from one request at a time to a saturated server:
+# a real `bowloc serve` on loopback (the default configuration, gardens-point
+# K = 5000 map of vocabulary seed 1, built on first use) takes gardens-point
+# queries (every 10th, in turn) from wrk with each number of connections,
+# once with tiles ahead off and once on, taking turns for ROUNDS rounds so a
+# slow spell of the machine falls on both alike. Prints, per connection
+# count and setting, the medians over rounds of requests per second and of
+# wrk's latency percentiles, and the ratios on/off.
+#
+#   scripts/ahead.sh [CONNECTIONS,...] [SECONDS] [ROUNDS]
+#
+# Defaults: 1,2,4 connections; 10 s; 3 rounds. Run it on a quiet machine.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+. scripts/lib/server.sh
+command -v wrk >/dev/null || { echo "wrk missing: apt-get install wrk" >&2; exit 1; }
+IFS=, read -ra connection_counts <<<"${1:-1,2,4}"
+seconds=${2:-10}
+rounds=${3:-3}
+gardens_map 5000 1
+tmp=$(mktemp -d)
+trap 'stop_server; rm -rf "$tmp"' EXIT
+src=../shared/datasets/gardens-point
+{
+  echo 'local paths = {'
+  awk 'NR % 10 == 1' "$src/queries.txt" | while read -r q; do echo "  \"$src/$q\","; done
+  echo '}'
+  cat <<'LUA'
+local bodies = {}
+for _, p in ipairs(paths) do
+  local f = assert(io.open(p, "rb"))
+  bodies[#bodies + 1] = f:read("*all")
+  f:close()
+end
+local i = 0
+wrk.method = "POST"
+wrk.headers["Content-Type"] = "image/jpeg"
+request = function()
+  i = i % #bodies + 1
+  return wrk.format(nil, nil, nil, bodies[i])
+end
+LUA
+} >"$tmp/post.lua"
+server_config 0 32 data/gardens-5000 "" "" >"$tmp/config.toml"
+# ms from wrk's "50%   12.34ms" lines (us and s converted)
+to_ms() { awk '{v = $2; u = v; sub(/[0-9.]+/, "", u); sub(/[a-z]+$/, "", v);
+  if (u == "us") v /= 1000; else if (u == "s") v *= 1000; printf "%.2f\n", v}'; }
+# tiles the server has extracted ahead and used so far
+tiles_ahead() {
+  curl -s "http://$SERVER_ADDR/metrics" |
+    awk '/^bowloc_localize_tiles_ahead_total\{used="true"\}/ {n = $2} END {print n + 0}'
+}
+median() { sort -g | awk '{v[NR] = $1} END {print v[int((NR + 1) / 2)]}'; }
+for round in $(seq "$rounds"); do
+  for c in "${connection_counts[@]}"; do
+    for ahead in false true; do
+      BOWLOC_SERVER__TILES_AHEAD=$ahead start_server "$tmp/config.toml" "$tmp/server.log"
+      # one pass over the queries first: the learned plan's trials
+      wrk -t 1 -c 1 -d 3s -s "$tmp/post.lua" "http://$SERVER_ADDR/localize" >/dev/null
+      before=$(tiles_ahead)
+      wrk -t 1 -c "$c" -d "${seconds}s" --latency -s "$tmp/post.lua" \
+        "http://$SERVER_ADDR/localize" >"$tmp/wrk.txt"
+      ahead_used=$(($(tiles_ahead) - before))
+      stop_server
+      rps=$(awk '/Requests\/sec/ {print $2}' "$tmp/wrk.txt")
+      p50=$(grep -E '^ +50%' "$tmp/wrk.txt" | to_ms)
+      p99=$(grep -E '^ +99%' "$tmp/wrk.txt" | to_ms)
+      non2xx=$(awk '/Non-2xx/ {n = $NF} END {print n + 0}' "$tmp/wrk.txt")
+      echo "round $round: connections=$c tiles_ahead=$ahead requests_per_s=$rps" \
+        "latency_p50=${p50}ms latency_p99=${p99}ms non_2xx=$non2xx tiles_used_ahead=$ahead_used"
+      echo "$c $ahead $rps $p50 $p99" >>"$tmp/rows"
+    done
+  done
+done
+echo "$(lscpu | sed -n 's/^Model name: *//p'), $(nproc) CPUs; medians over $rounds rounds of ${seconds} s"
+for c in "${connection_counts[@]}"; do
+  for ahead in false true; do
+    for col in 3 4 5; do
+      awk -v c="$c" -v a="$ahead" -v k="$col" '$1 == c && $2 == a {print $k}' "$tmp/rows" |
+        median >"$tmp/m-$ahead-$col"
+    done
+  done
+  read -r rps0 <"$tmp/m-false-3"; read -r rps1 <"$tmp/m-true-3"
+  read -r p500 <"$tmp/m-false-4"; read -r p501 <"$tmp/m-true-4"
+  read -r p990 <"$tmp/m-false-5"; read -r p991 <"$tmp/m-true-5"
+  awk -v c="$c" -v r0="$rps0" -v r1="$rps1" -v a0="$p500" -v a1="$p501" -v b0="$p990" -v b1="$p991" \
+    'BEGIN {printf "connections=%s: requests/s %.1f off, %.1f on (%.3fx); p50 %.1f off, %.1f on ms (%.3fx); p99 %.1f off, %.1f on ms (%.3fx)\n",
+      c, r0, r1, r1 / r0, a0, a1, a1 / a0, b0, b1, b1 / b0}'
+done
