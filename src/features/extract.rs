@@ -87,18 +87,11 @@ impl Frame {
         frame_size(&self.mat)
     }
 
-    /// Detect and describe inside `region` (x, y, width, height, clipped to
-    /// the frame), keeping only keypoints whose centre lies in `core` (frame
-    /// coordinates, half-open). Keypoints come
-    /// back in frame coordinates, strongest first, at most `cap` of them
-    /// (0 = all).
-    pub fn detect(
-        &mut self,
-        region: (u32, u32, u32, u32),
-        core: (u32, u32, u32, u32),
-        cap: usize,
-    ) -> Result<Features, FeatureError> {
-        let r = Region { region, core, cap };
+    /// Detect and describe inside `r.region` (x, y, width, height, clipped
+    /// to the frame), keeping only keypoints whose centre lies in `r.core`
+    /// (frame coordinates, half-open). Keypoints come back in frame
+    /// coordinates, strongest first, at most `r.cap` of them (0 = all).
+    pub fn detect(&mut self, r: Region) -> Result<Features, FeatureError> {
         detect_in(&self.mat, &mut self.sift, self.rootsift, r)
     }
 
@@ -142,7 +135,7 @@ impl Frame {
     /// [`Frame::detect`] of one region, with the time it took.
     fn detect_timed(&mut self, r: Region) -> Result<Timed, FeatureError> {
         let t = Instant::now();
-        detect_in(&self.mat, &mut self.sift, self.rootsift, r).map(|f| (f, t.elapsed()))
+        self.detect(r).map(|f| (f, t.elapsed()))
     }
 
     /// Detect and describe on the whole frame downscaled to half its size:
@@ -181,7 +174,8 @@ impl Frame {
 /// Features with the time their extraction took.
 pub type Timed = (Features, Duration);
 
-/// One region to extract ([`Frame::detect`]'s arguments).
+/// One region to extract: the pixels SIFT sees, the core whose keypoints
+/// are kept, and how many of them at most.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Region {
     pub region: (u32, u32, u32, u32),
@@ -294,7 +288,11 @@ pub fn extract(image: &GrayImage, config: &ExtractConfig) -> Result<Features, Fe
     let mut frame = Frame::new(image, config)?;
     let (w, h) = frame.size();
     let all = (0, 0, w, h);
-    frame.detect(all, all, config.sift.max_features as usize)
+    frame.detect(Region {
+        region: all,
+        core: all,
+        cap: config.sift.max_features as usize,
+    })
 }
 
 /// Decode a file and extract its features.

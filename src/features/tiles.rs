@@ -11,6 +11,10 @@
 //! plain grid's, every scale, and the search starts over on them
 //! ([`crate::search::Search::feed_tile`]): an answer not taken on the
 //! coarse pass is the tiles alone's.
+//!
+//! A core that would otherwise idle may extract the tile after the next one
+//! at the same time ([`Tiles::extract_ahead`]); it is handed out in its turn,
+//! so the search sees the same features in the same order either way.
 
 use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage, Region, Timed};
 use crate::search::permute::{self, TileGuide, TileOrder};
@@ -438,10 +442,7 @@ impl Tiles {
                 self.extracted_ahead += 1;
                 return Some(self.handed_out(first));
             }
-            (Unit::Tile(tile), _) => {
-                let r = self.region(tile, cap);
-                self.frame.detect(r.region, r.core, r.cap)
-            }
+            (Unit::Tile(tile), _) => self.frame.detect(self.region(tile, cap)),
         };
         self.last_time = started.elapsed();
         Some(features)
