@@ -29,7 +29,7 @@
 # search is sent alone, as before.
 # The server learns the coarse pass (`tiles = "…,auto"`) from the requests
 # it answers, as it does in service; each server answers the breakdown's
-# requests before the comparison (the first 16 are the learned plan's
+# requests before the comparison (the first 32 are the learned plan's
 # trials), so every seed is compared after them.
 set -euo pipefail
 cd "$(dirname "$0")/.."
