@@ -52,7 +52,6 @@ tiles_ahead() {
   curl -s "http://$SERVER_ADDR/metrics" |
     awk '/^bowloc_localize_tiles_ahead_total\{used="true"\}/ {n = $2} END {print n + 0}'
 }
-median() { sort -g | awk '{v[NR] = $1} END {print v[int((NR + 1) / 2)]}'; }
 for round in $(seq "$rounds"); do
   for c in "${connection_counts[@]}"; do
     for ahead in false true; do

@@ -55,7 +55,6 @@ trap 'stop_server; rm -rf "$tmp"' EXIT
 plan=${LATENCY_PLAN:+[search]
 tiles = \"$LATENCY_PLAN\"}
 src=../shared/datasets/$name
-median() { sort -g | awk '{v[NR] = $1} END {print v[int((NR + 1) / 2)]}'; }
 col() { cut -f"$1" "$tmp/rows" | median; }
 # "LINE PATH" of each query used
 queries() { awk -v e="$every" 'NR % e == 1 || e == 1 {print NR, $0}' $src/queries.txt; }

@@ -346,11 +346,11 @@ pub struct TileUse {
     /// each at what the tile at its place in the order has taken lately.
     pub saved_ms: f64,
     /// Tiles extracted ahead of their turn on a core that would otherwise
-    /// idle, and of those the one the search stopped before, if any (not
-    /// sent: they follow the server's load; `/metrics` counts them).
+    /// idle (not sent: they follow the server's load; `/metrics` counts
+    /// them).
     #[serde(skip)]
     #[schema(ignore)]
-    pub ahead: (usize, bool),
+    pub ahead: crate::features::TilesAhead,
 }
 
 fn display<T: std::fmt::Display, S: serde::Serializer>(v: &T, s: S) -> Result<S::Ok, S::Error> {
@@ -371,7 +371,7 @@ pub struct Extraction {
     /// What the tiles not extracted were expected to take.
     pub skipped: Duration,
     /// [`TileUse::ahead`].
-    pub ahead: (usize, bool),
+    pub ahead: crate::features::TilesAhead,
 }
 
 /// The stopping rule the search ran with.

@@ -466,7 +466,7 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
 /// ahead says so, and a time budget keeps one tile at a time.
 #[test]
 fn tiles_extracted_ahead_change_nothing_in_the_answer() {
-    use bowloc::features::{GrayImage, TileGrid, Tiles, decode_file};
+    use bowloc::features::{GrayImage, TileGrid, Tiles, TilesAhead, decode_file};
     use bowloc::search::{SpareCore, TileOrder};
     let real = common::real_map("rtabmap-loop", 1000);
     let grid: TileGrid = "2x2+24".parse().unwrap();
@@ -487,8 +487,9 @@ fn tiles_extracted_ahead_change_nothing_in_the_answer() {
         }
         assert!(two.next_tile().is_none());
         // four tiles: the second and the fourth came ahead, both used
-        assert_eq!(two.ahead(), (2, false), "{}", q.name);
-        assert_eq!(one.ahead(), (0, false), "{}", q.name);
+        let ahead = |extracted, unused| TilesAhead { extracted, unused };
+        assert_eq!(two.ahead(), ahead(2, false), "{}", q.name);
+        assert_eq!(one.ahead(), ahead(0, false), "{}", q.name);
     }
 
     let mut localizer = real.localizer(true);
@@ -500,7 +501,7 @@ fn tiles_extracted_ahead_change_nothing_in_the_answer() {
         ..Default::default()
     };
     let spare = SearchOptions {
-        spare_core: Some(SpareCore::always()),
+        spare_core: Some(SpareCore::new(|| true)),
         ..alone.clone()
     };
     let budget = SearchOptions {
@@ -526,16 +527,17 @@ fn tiles_extracted_ahead_change_nothing_in_the_answer() {
             "{}",
             q.name
         );
-        assert_eq!(a.tiles.ahead, (0, false), "{}", q.name);
+        assert_eq!(a.tiles.ahead, TilesAhead::default(), "{}", q.name);
         // tiles come in pairs: one ahead per pair begun
-        assert_eq!(b.tiles.ahead.0, b.tiles.extracted.div_ceil(2), "{}", q.name);
-        assert_eq!(b.tiles.ahead.1, b.tiles.extracted % 2 == 1, "{}", q.name);
-        went_ahead += usize::from(b.tiles.ahead.0 > 0);
-        stopped_ahead += usize::from(b.tiles.ahead.1);
+        let ahead = b.tiles.ahead;
+        assert_eq!(ahead.extracted, b.tiles.extracted.div_ceil(2), "{}", q.name);
+        assert_eq!(ahead.unused, b.tiles.extracted % 2 == 1, "{}", q.name);
+        went_ahead += usize::from(ahead.extracted > 0);
+        stopped_ahead += usize::from(ahead.unused);
         let c = localizer
             .localize_file(&q.path, &budget, Some(grid))
             .unwrap();
-        assert_eq!(c.tiles.ahead, (0, false), "{}", q.name);
+        assert_eq!(c.tiles.ahead, TilesAhead::default(), "{}", q.name);
         assert_eq!(ids(&a), ids(&c), "{}", q.name);
     }
     assert_eq!(went_ahead, real.data.queries.len());

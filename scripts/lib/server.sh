@@ -27,8 +27,12 @@
 #                            the server stopped, on exit) holding post.lua,
 #                            which posts LOAD_IMAGE (one of rtabmap-loop's
 #                            queries)
+#   median                   the median of the numbers on stdin
 
 BOWLOC_BIN=./target/release/bowloc
+
+# one number a line; of an even count, the upper middle one
+median() { sort -g | awk '{v[NR] = $1} END {print v[int((NR + 1) / 2)]}'; }
 DATASET=../shared/datasets/rtabmap-loop
 
 map_dir() {

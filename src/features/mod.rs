@@ -18,7 +18,7 @@ pub use config::{ExtractConfig, SiftParams};
 pub use decode::{DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe};
 pub use extract::{Descriptors, Features, Frame, Region, Timed, extract, extract_file};
 pub use thumbnail::thumbnail;
-pub use tiles::{TileGrid, TilePlan, Tiles};
+pub use tiles::{TileGrid, TilePlan, Tiles, TilesAhead};
 
 /// Why an image yielded no descriptors.
 #[derive(Debug, thiserror::Error)]

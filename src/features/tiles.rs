@@ -237,6 +237,17 @@ fn cells(cores: &[(u32, u32, u32, u32)]) -> Vec<[u32; 2]> {
         .collect()
 }
 
+/// The tiles of one image extracted ahead of their turn
+/// ([`Tiles::extract_ahead`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TilesAhead {
+    /// Tiles extracted ahead.
+    pub extracted: usize,
+    /// One of them was never handed out: the search stopped before it
+    /// (or has not asked for it yet).
+    pub unused: bool,
+}
+
 /// The tiles of one image, extracted one at a time in a given order.
 pub struct Tiles {
     frame: Frame,
@@ -406,10 +417,12 @@ impl Tiles {
         self.two_at_a_time = two_at_a_time;
     }
 
-    /// Tiles extracted ahead so far, and whether one of them waits, not
-    /// handed out (yet).
-    pub fn ahead(&self) -> (usize, bool) {
-        (self.extracted_ahead, self.ahead.is_some())
+    /// The tiles extracted ahead so far.
+    pub fn ahead(&self) -> TilesAhead {
+        TilesAhead {
+            extracted: self.extracted_ahead,
+            unused: self.ahead.is_some(),
+        }
     }
 
     /// What the unit handed out last took to extract on its own thread

@@ -291,6 +291,14 @@ pub struct BootstrapConfig {
     pub seed: u64,
 }
 
+/// The cores this process may use, read once (the standard library reads
+/// the cgroup's quota from files each time it is asked, and every request
+/// asks).
+fn machine_cores() -> usize {
+    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
 impl Default for ServerConfig {
     fn default() -> Self {
         Self {
@@ -686,7 +694,6 @@ impl Config {
             .map_err(|e| format!("{e} (or_verified = 0 turns the check off)"))
     }
 
-    /// Worker threads: the configured count, or one per core.
     /// Whether a core would idle now, when `admitted` jobs run or wait on
     /// the pool: each takes `opencv_threads` of the machine's cores. `None`
     /// when `server.tiles_ahead` is off.
@@ -694,16 +701,17 @@ impl Config {
         &self,
         admitted: impl Fn() -> usize + Send + Sync + 'static,
     ) -> Option<SpareCore> {
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let cores = machine_cores();
         let each = self.server.opencv_threads.max(1);
         self.server
             .tiles_ahead
             .then(|| SpareCore::new(move || admitted() * each < cores))
     }
 
+    /// Worker threads: the configured count, or one per core.
     pub fn worker_count(&self) -> usize {
         match self.server.workers {
-            0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+            0 => machine_cores(),
             n => n,
         }
     }

@@ -340,7 +340,7 @@ pub fn localized(answer: &Localization) {
         histogram!(TILES_RATIO).record(tiles.extracted as f64 / tiles.total as f64);
         histogram!(EXTRACTION_SAVED).record(tiles.saved_ms / 1e3);
     }
-    let (ahead, unused) = (tiles.ahead.0 as u64, u64::from(tiles.ahead.1));
+    let (ahead, unused) = (tiles.ahead.extracted as u64, u64::from(tiles.ahead.unused));
     if ahead > 0 {
         counter!(TILES_AHEAD, "used" => "true").increment(ahead - unused);
         counter!(TILES_AHEAD, "used" => "false").increment(unused);
