@@ -66,6 +66,14 @@ pub struct EvalArgs {
     /// whole queries.
     #[arg(long, default_value = "2x2+24")]
     tiles: TilePlan,
+    /// With `--tiles …,auto`: also replay, for every setting given with
+    /// --set that stops early, this many fresh plans (each a server just
+    /// started), each over the queries once in a random order of its own, and
+    /// report per vocabulary seed how many settled on the coarse pass, the
+    /// share of searches they started with it, their median request against
+    /// the whole-image full search's and their recall@1.
+    #[arg(long, default_value_t = 0)]
+    plan_orders: u32,
     /// The order the tiles are replayed in, as the service extracts them.
     #[arg(long, default_value_t = bowloc::search::TileOrder::default(), value_parser = super::args::choice_parser::<bowloc::search::TileOrder>())]
     tile_order: bowloc::search::TileOrder,
@@ -129,6 +137,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         place_window: a.place_window,
         distinct_cut: a.distinct_cut,
         tile_order: a.tile_order,
+        plan_orders: a.plan_orders,
         vocab: a.vocab,
         out: a
             .out
@@ -190,6 +199,24 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
                 r.verify_ms.median,
             );
         }
+    }
+    for r in &report.plan_orders {
+        let settled = r.orders.iter().filter(|o| o.settled_coarse == Some(true));
+        let ratios: Vec<f64> = r
+            .orders
+            .iter()
+            .map(|o| o.median_ms / r.full_median_ms)
+            .collect();
+        println!(
+            "{}, vocabulary seed {}: {} of {} query orders settled on the coarse pass; \
+             median request {:.3} to {:.3} of the whole-image full search's",
+            r.label,
+            r.seed,
+            settled.count(),
+            r.orders.len(),
+            ratios.iter().copied().fold(f64::INFINITY, f64::min),
+            ratios.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        );
     }
     println!("{}", config.out.join("results.md").display());
     Ok(())

@@ -9,7 +9,9 @@
 //!    records where they were made;
 //! 2. [`timing`]: each query quantized once per vocabulary (timed);
 //! 3. [`sweep`]: calibrate the grids (on the first vocabulary), then vote
-//!    every setting × vocabulary × run × query;
+//!    every setting × vocabulary × run × query; with a learned coarse pass,
+//!    [`plan_orders`] (when asked) replays fresh plans over random query
+//!    orders;
 //! 4. [`summary`] (with the definitions in [`metrics`]): every figure as a
 //!    mean over vocabulary seeds with its spread over seeds and, apart, over
 //!    runs; [`recommend`] and [`equal_recall`] decide on the worst seed;
@@ -28,6 +30,7 @@ pub mod cache;
 pub mod equal_recall;
 pub mod machine;
 pub mod metrics;
+pub mod plan_orders;
 pub mod plots;
 pub mod recommend;
 pub mod sequence;
@@ -120,6 +123,9 @@ pub struct EvalConfig {
     pub place_window: u32,
     /// The order the queries' tiles are replayed in.
     pub tile_order: crate::search::TileOrder,
+    /// With a learned coarse pass: fresh plans replayed over this many
+    /// random query orders for every setting asked for ([`plan_orders`]).
+    pub plan_orders: u32,
 }
 
 /// The dataset as evaluated.
@@ -239,6 +245,9 @@ pub struct Report {
     pub per_query: PerQuery,
     /// The verification pass, when asked for.
     pub verification: Option<verify::VerificationReport>,
+    /// Fresh learned plans over random query orders, when asked for.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub plan_orders: Vec<plan_orders::PlanOrders>,
 }
 
 /// The grids of the rules asked for, the full search first.
@@ -303,6 +312,10 @@ fn validate(config: &EvalConfig) -> anyhow::Result<Vec<&'static RuleGrid>> {
     anyhow::ensure!(
         (0.0..1.0).contains(&config.tolerance),
         "--tolerance must lie in [0, 1)"
+    );
+    anyhow::ensure!(
+        config.plan_orders == 0 || config.tiles.learn_coarse,
+        "--plan-orders replays a learned coarse pass: give --tiles …,auto"
     );
     let grids = resolve_rules(&config.rules)?;
     let mut rules: Vec<String> = grids.iter().map(|g| g.rule.to_owned()).collect();
@@ -681,6 +694,70 @@ fn sweep_settings(
     }
 }
 
+/// Stage 3c ([`plan_orders`]): with a learned coarse pass and
+/// `plan_orders` asked for, every setting asked for that stops early (the
+/// one re-ranked by verification, when verification is on) replayed as
+/// fresh plans over random query orders, on every vocabulary.
+#[allow(clippy::too_many_arguments)]
+fn replay_plan_orders(
+    config: &EvalConfig,
+    maps: &[MapIndex],
+    seeds: &[u64],
+    words: &Words,
+    plan: &SweepPlan,
+    swept: &Swept,
+    dataset: &Dataset,
+    ranking: sweep::Ranking,
+) -> Vec<plan_orders::PlanOrders> {
+    let Some(coarse) = words.coarse.as_ref().filter(|_| config.plan_orders > 0) else {
+        return Vec::new();
+    };
+    let replayed: Vec<usize> = plan
+        .explicit
+        .iter()
+        .map(|&i| {
+            let verified = plan.verified_pairs.iter().find(|p| p.0 == i);
+            verified.map_or(i, |p| p.1)
+        })
+        .filter(|&i| plan.settings[i].rule.info().stops_early)
+        .collect();
+    let bar = progress_bar(
+        (replayed.len() * maps.len()) as u64,
+        "replaying the learned plan over query orders",
+    );
+    let mut rows = Vec::new();
+    for &i in &replayed {
+        let setting = &plan.settings[i];
+        for (s, map) in maps.iter().enumerate() {
+            let learned = sweep::LearnedPlan {
+                plain: (&words.plain[s].queries, &words.plain[s].costs),
+                coarse: (&coarse[s].queries, &coarse[s].costs),
+            };
+            let full = swept
+                .whole
+                .as_ref()
+                .map_or(&swept.full_ms[s], |(_, w)| &w[s]);
+            let full: Vec<f64> = full.iter().flatten().copied().collect();
+            rows.push(plan_orders::PlanOrders {
+                label: setting.label(),
+                seed: seeds[s],
+                full_median_ms: timing::median(&full),
+                orders: plan_orders::replay(
+                    map,
+                    learned,
+                    setting,
+                    config.plan_orders,
+                    &dataset.truth,
+                    ranking,
+                ),
+            });
+            bar.inc(1);
+        }
+    }
+    bar.finish_and_clear();
+    rows
+}
+
 /// One setting's runs on every seed, with the costs and full-search times
 /// its time shares need.
 fn by_seed<'a>(
@@ -873,6 +950,9 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         None => recommendation.as_ref().map(|r| r.index),
     };
     let histogram = histogram_index.map(|i| histogram_of(&swept.outcomes, i, &summaries[i].label));
+    let plan_orders = replay_plan_orders(
+        config, &maps, &seeds, &words, &plan, &swept, &dataset, ranking,
+    );
 
     // 5. with and without verification, side by side (first vocabulary)
     let verification = config
@@ -936,6 +1016,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         histogram,
         whole_image,
         verification,
+        plan_orders,
         per_query: PerQuery {
             queries: dataset.queries.iter().map(|q| q.name.clone()).collect(),
             truth: dataset

@@ -642,13 +642,8 @@ pub fn run_learned(
                 .map(|run| {
                     let out = (0..plan.plain.0.len())
                         .map(|q| {
-                            let coarse = choice.as_ref().is_some_and(CoarseChoice::choose);
-                            let (queries, costs) = if coarse { plan.coarse } else { plan.plain };
-                            let o = search_query(map, &queries[q], setting, seed(run, q), ranking);
-                            if let Some(choice) = &choice {
-                                choice.record(coarse, served_ms(&o, &costs[q]), o.tiles <= 1);
-                            }
-                            o
+                            let at = seed(run, q);
+                            learned_search(map, plan, setting, choice.as_ref(), q, at, ranking)
                         })
                         .collect();
                     bar.inc(1);
@@ -659,8 +654,38 @@ pub fn run_learned(
         .collect()
 }
 
+/// One search under a learned plan: `choice` (none: a rule that never
+/// stops early, which searches without the coarse pass and learns nothing)
+/// picks the plan and is told what the search cost and whether it ended on
+/// its first unit.
+pub fn learned_search(
+    map: &MapIndex,
+    plan: LearnedPlan<'_>,
+    setting: &Setting,
+    choice: Option<&CoarseChoice>,
+    query: usize,
+    seed: u64,
+    ranking: Ranking,
+) -> Outcome {
+    let coarse = choice.is_some_and(CoarseChoice::choose);
+    let (queries, costs) = if coarse { plan.coarse } else { plan.plain };
+    let o = search_query(map, &queries[query], setting, seed, ranking);
+    if let Some(choice) = choice {
+        choice.record(coarse, served_ms(&o, &costs[query]), o.tiles <= 1);
+    }
+    o
+}
+
+impl LearnedPlan<'_> {
+    /// What query `query` cost in the plan its outcome `o` was searched in.
+    pub fn cost(&self, o: &Outcome, query: usize) -> &QueryCost {
+        let (_, costs) = if o.coarse { self.coarse } else { self.plain };
+        &costs[query]
+    }
+}
+
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::index::{ImageWords, MapBuilder};
     use crate::search::stop::rule_info;
@@ -738,7 +763,7 @@ mod tests {
         assert_eq!(bisect(0.0, 10.0, 100.0, false, &rising).0, 10.0);
     }
 
-    fn toy_map() -> MapIndex {
+    pub(in crate::eval) fn toy_map() -> MapIndex {
         let mut b = MapBuilder::new(8);
         let images: [&[u32]; 4] = [&[0, 1, 2, 2], &[2, 3, 4], &[4, 5, 6, 6], &[6, 7, 0, 1]];
         for (i, w) in images.iter().enumerate() {
@@ -772,10 +797,11 @@ mod tests {
         );
     }
 
-    #[test]
-    fn the_learned_plan_is_replayed_query_by_query_as_the_service_learns_it() {
+    /// `n` identical queries of four tiles of 10 features, all on image 0 of
+    /// [`toy_map`]; with the coarse pass, 8 of them found first at a fifth of
+    /// a tile's cost: (plain, coarse, costs).
+    pub(in crate::eval) fn toy_learned(n: usize) -> (Vec<Query>, Vec<Query>, Vec<QueryCost>) {
         use super::super::tiles::Tile;
-        let map = toy_map();
         let tile = |features: u32, ms: f32| Tile {
             features,
             area: 0.25,
@@ -783,8 +809,6 @@ mod tests {
             corners: 0.0,
             cell: [0, 0],
         };
-        // four tiles of 10 features, all on image 0; with the coarse pass, 8
-        // of them found first at a fifth of a tile's cost
         let plain = Query {
             words: vec![0; 40],
             tiles: vec![tile(10, 10.0); 4],
@@ -799,9 +823,6 @@ mod tests {
             coarse_first: true,
             ..Query::default()
         };
-        let n = 100;
-        let plain = vec![plain; n];
-        let coarse = vec![coarse; n];
         let costs = vec![
             QueryCost {
                 quantize_ms_per_feature: 0.01,
@@ -809,6 +830,14 @@ mod tests {
             };
             n
         ];
+        (vec![plain; n], vec![coarse; n], costs)
+    }
+
+    #[test]
+    fn the_learned_plan_is_replayed_query_by_query_as_the_service_learns_it() {
+        let map = toy_map();
+        let n = 100;
+        let (plain, coarse, costs) = toy_learned(n);
         let plan = LearnedPlan {
             plain: (&plain, &costs),
             coarse: (&coarse, &costs),

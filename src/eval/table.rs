@@ -296,6 +296,7 @@ pub fn markdown(report: &Report) -> String {
     if let Some(v) = &report.verification {
         let _ = writeln!(s, "{}", super::verify::markdown(v));
     }
+    s.push_str(&super::plan_orders::markdown(&report.plan_orders));
     s
 }
 
