@@ -68,7 +68,8 @@ pub struct EvalArgs {
     tiles: TilePlan,
     /// With `--tiles …,auto`: also replay, for every setting given with
     /// --set that stops early, this many fresh plans (each a server just
-    /// started), each over the queries once in a random order of its own, and
+    /// started), each over the queries once per run, every time in a random
+    /// order of its own, and
     /// report per vocabulary seed how many settled on the coarse pass, the
     /// share of searches they started with it, their median request against
     /// the whole-image full search's and their recall@1.

@@ -742,11 +742,13 @@ fn replay_plan_orders(
                 label: setting.label(),
                 seed: seeds[s],
                 full_median_ms: timing::median(&full),
+                passes: config.runs,
                 orders: plan_orders::replay(
                     map,
                     learned,
                     setting,
                     config.plan_orders,
+                    config.runs,
                     &dataset.truth,
                     ranking,
                 ),

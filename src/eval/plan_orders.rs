@@ -1,8 +1,9 @@
 //! How much the learned coarse-pass plan (`--tiles …,auto`) depends on the
 //! order its queries come in. The sweep replays one plan over the dataset's
 //! order, as a server sent the queries in turn would learn it; here fresh
-//! plans, each a server just started, see the queries once in a random order
-//! of their own (`--plan-orders N`), and each order reports the share of its
+//! plans, each a server just started, see the queries as many times as the
+//! sweep has runs, each time in a random order of their own (`--plan-orders
+//! N`), and each order reports the share of its
 //! searches started with the coarse pass, the plan it settled on, its median
 //! request time against the whole-image full search's, and its recall@1.
 
@@ -30,6 +31,7 @@ pub struct OrderReplay {
     pub settled_coarse: Option<bool>,
     /// Median request time (every stage, decoding included), ms.
     pub median_ms: f64,
+    /// Mean over the passes.
     pub recall_at_1: f64,
 }
 
@@ -42,17 +44,21 @@ pub struct PlanOrders {
     /// Median request time of the whole-image full search (every run and
     /// query), ms: what `median_ms` is compared with.
     pub full_median_ms: f64,
+    /// Passes over the queries each order made.
+    pub passes: u32,
     pub orders: Vec<OrderReplay>,
 }
 
-/// Replay `orders` fresh plans of `setting`, each over the queries once in
-/// its own random order; order k draws the feature orders of the sweep's
-/// run k.
+/// Replay `orders` fresh plans of `setting`, each over `passes` passes of
+/// the queries, every pass in a random order of its own (the sweep's runs,
+/// shuffled); pass p of order k draws the feature orders of the sweep's run
+/// k·passes + p. Request times and recall@1 are over every search.
 pub fn replay(
     map: &MapIndex,
     plan: LearnedPlan<'_>,
     setting: &Setting,
     orders: u32,
+    passes: u32,
     truth: &[HashSet<u32>],
     ranking: Ranking,
 ) -> Vec<OrderReplay> {
@@ -61,22 +67,29 @@ pub fn replay(
         .into_par_iter()
         .map(|k| {
             let choice = CoarseChoice::default();
-            let mut outcomes: Vec<Option<Outcome>> = vec![None; n];
-            let mut ms = Vec::with_capacity(n);
-            for q in permutation(n, ORDER_SALT ^ u64::from(k)) {
-                let q = q as usize;
-                let at = sweep::seed(k, q);
-                let o = sweep::learned_search(map, plan, setting, Some(&choice), q, at, ranking);
-                ms.push(stage_sample(&o, plan.cost(&o, q)).total());
-                outcomes[q] = Some(o);
+            let mut ms = Vec::with_capacity(n * passes as usize);
+            let mut started = 0;
+            let mut recall = Vec::with_capacity(passes as usize);
+            for p in 0..passes {
+                let run = k * passes + p;
+                let mut outcomes: Vec<Option<Outcome>> = vec![None; n];
+                for q in permutation(n, ORDER_SALT ^ u64::from(run)) {
+                    let q = q as usize;
+                    let at = sweep::seed(run, q);
+                    let o =
+                        sweep::learned_search(map, plan, setting, Some(&choice), q, at, ranking);
+                    ms.push(stage_sample(&o, plan.cost(&o, q)).total());
+                    started += usize::from(o.coarse);
+                    outcomes[q] = Some(o);
+                }
+                let outcomes: Vec<Outcome> = outcomes.into_iter().flatten().collect();
+                recall.push(metrics::recall_at(&answers(&outcomes, truth), 1));
             }
-            let outcomes: Vec<Outcome> = outcomes.into_iter().flatten().collect();
-            let started = outcomes.iter().filter(|o| o.coarse).count();
             OrderReplay {
-                started_coarse: started as f64 / n.max(1) as f64,
+                started_coarse: started as f64 / ms.len().max(1) as f64,
                 settled_coarse: choice.preferred(),
                 median_ms: median(&ms),
-                recall_at_1: metrics::recall_at(&answers(&outcomes, truth), 1),
+                recall_at_1: metrics::mean(&recall),
             }
         })
         .collect()
@@ -90,12 +103,14 @@ pub fn markdown(rows: &[PlanOrders]) -> String {
     let mut out = format!(
         "\n## The learned plan over query orders\n\n\
          Each order is a fresh plan (a server just started) that sees every query \
-         once, in a random order of its own ({} orders a seed). `settled coarse`: \
+         once in each of {} passes, every pass in a random order of its own ({} \
+         orders a seed). `settled coarse`: \
          orders whose plan preferred the coarse pass after the last query; `started \
          coarse` and `× full search` (its median request against the whole-image full \
          search's median): min / median / max over the orders.\n\n\
          | setting | seed | settled coarse | started coarse | × full search | recall@1 |\n\
          | --- | --- | --- | --- | --- | --- |\n",
+        first.passes,
         first.orders.len()
     );
     for r in rows {
@@ -143,14 +158,14 @@ mod tests {
             .map(|q| HashSet::from([if q % 2 == 0 { 0 } else { 3 }]))
             .collect();
         let setting = Setting::new(RuleSpec::new("fixed", Some(0.2)).unwrap(), 0);
-        let r = replay(&map, plan, &setting, 3, &truth, Ranking::top(1));
+        let r = replay(&map, plan, &setting, 3, 2, &truth, Ranking::top(1));
         assert_eq!(r.len(), 3);
         // the coarse pass costs more on these queries: each fresh plan
         // starts with it in its trials and on one request in EXPLORE_EVERY
-        let explored = (2 * CoarseChoice::TRIAL + 1..=n as u64)
+        let explored = (2 * CoarseChoice::TRIAL + 1..=2 * n as u64)
             .filter(|k| k.is_multiple_of(CoarseChoice::EXPLORE_EVERY))
             .count();
-        let started = (CoarseChoice::TRIAL as usize + explored) as f64 / n as f64;
+        let started = (CoarseChoice::TRIAL as usize + explored) as f64 / (2 * n) as f64;
         for o in &r {
             assert_eq!(o.settled_coarse, Some(false), "{o:?}");
             assert!((o.started_coarse - started).abs() < 1e-12, "{o:?}");
@@ -172,10 +187,14 @@ mod tests {
             label: "place-z 2.25 w=20".into(),
             seed: 2,
             full_median_ms: 20.0,
+            passes: 3,
             orders: vec![order(true, 6.0), order(false, 10.0), order(true, 7.0)],
         }];
         let md = markdown(&rows);
-        assert!(md.contains("3 orders a seed"), "{md}");
+        assert!(
+            md.contains("3 passes, every pass in a random order of its own (3 orders a seed)"),
+            "{md}"
+        );
         assert!(
             md.contains("| place-z 2.25 w=20 | 2 | 2 of 3 | 10.0 % / 80.0 % / 80.0 % | 0.300 / 0.350 / 0.500 | 90.0 % / 90.0 % / 90.0 % |"),
             "{md}"
