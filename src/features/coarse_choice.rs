@@ -4,9 +4,13 @@
 //! its keypoints (small images, distinctive places); when it seldom does, it
 //! is paid on top of the tiles. Which holds depends on the map and its
 //! queries, so the service measures it: both plans are tried on the first
-//! requests, then the one whose typical request is shorter is used, and the
-//! other is tried again on one request in [`CoarseChoice::EXPLORE_EVERY`], so
-//! a change of queries is noticed. The coarse pass is preferred only while
+//! requests, then each request takes the plan it draws as the cheaper one
+//! from what each has cost (Thompson sampling: a typical time drawn for each
+//! plan from its mean and standard error, the smaller wins), so a plan whose
+//! trials were unlucky by chance is tried again until its costs say so, and
+//! a plan clearly slower is left alone. The one not preferred is still tried
+//! on one request in [`CoarseChoice::EXPLORE_EVERY`], so a change of queries
+//! is noticed. The coarse pass is taken only while
 //! most of its requests end on it ([`CoarseChoice::MIN_ENDED_ON_COARSE`]):
 //! a pass that seldom ends a search is paid for nothing by most requests,
 //! which then start over on the tiles (when the tiles after it kept only the
@@ -20,8 +24,10 @@
 //! requests as much as the many fast ones.
 //! No OpenCV here: the policy is plain arithmetic over reported times, and
 //! `bowloc eval --tiles …,auto` replays it over cached queries
-//! (`eval::sweep::run_learned`).
+//! (`eval::sweep::run_learned`; `--plan-orders` over random query orders).
 
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use std::sync::Mutex;
 
 /// The running choice between a grid without and with the coarse pass.
@@ -30,12 +36,25 @@ pub struct CoarseChoice {
     state: Mutex<State>,
 }
 
-#[derive(Debug, Default, Clone, Copy)]
+#[derive(Debug, Clone)]
 struct State {
     /// Requests seen by [`CoarseChoice::choose`].
     requests: u64,
     /// Without (0) and with (1) the coarse pass.
     arms: [Arm; 2],
+    /// The draws, from a fixed seed: a replay of the same requests makes
+    /// the same choices.
+    rng: ChaCha8Rng,
+}
+
+impl Default for State {
+    fn default() -> Self {
+        Self {
+            requests: 0,
+            arms: [Arm::default(); 2],
+            rng: ChaCha8Rng::seed_from_u64(0x636f_6172_7365),
+        }
+    }
 }
 
 /// What one plan has cost.
@@ -47,6 +66,8 @@ pub struct Arm {
     /// [`CoarseChoice::MEMORY`] samples, then a moving average that weighs
     /// the last one by 1/MEMORY.
     pub mean_ln_ms: f64,
+    /// Mean of ln(request time in ms)², averaged as `mean_ln_ms` is.
+    pub mean_sq_ln_ms: f64,
     /// Share of its requests that ended on their first unit (the coarse
     /// pass, or the first tile), averaged as `mean_ln_ms` is.
     pub ended_first: f64,
@@ -56,6 +77,24 @@ impl Arm {
     /// The typical request time (ms): the geometric mean.
     pub fn typical_ms(&self) -> f64 {
         self.mean_ln_ms.exp()
+    }
+
+    /// The squared standard error of `mean_ln_ms`: the variance of
+    /// ln(ms) over the samples the average remembers (at most
+    /// [`CoarseChoice::MEMORY`]).
+    fn squared_error(&self) -> f64 {
+        let variance = (self.mean_sq_ln_ms - self.mean_ln_ms * self.mean_ln_ms).max(0.0);
+        variance / (self.samples as f64).clamp(1.0, CoarseChoice::MEMORY)
+    }
+
+    /// A typical ln(ms) drawn from what the arm has cost: normal about its
+    /// mean with its standard error.
+    fn draw(&self, rng: &mut ChaCha8Rng) -> f64 {
+        // Box–Muller
+        let u: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
+        let v: f64 = rng.random();
+        let z = (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos();
+        self.mean_ln_ms + z * self.squared_error().sqrt()
     }
 }
 
@@ -87,12 +126,11 @@ impl CoarseChoice {
                 std::cmp::Ordering::Equal => s.requests.is_multiple_of(2),
             };
         }
-        let best = Self::coarse_wins(plain, coarse);
         if s.requests.is_multiple_of(Self::EXPLORE_EVERY) {
-            !best
-        } else {
-            best
+            return !Self::coarse_wins(plain, coarse);
         }
+        coarse.ended_first > Self::MIN_ENDED_ON_COARSE
+            && coarse.draw(&mut s.rng) < plain.draw(&mut s.rng)
     }
 
     /// Whether the coarse pass is the better plan: its typical request is
@@ -113,7 +151,9 @@ impl CoarseChoice {
         let arm = &mut s.arms[coarse as usize];
         arm.samples += 1;
         let weight = (1.0 / arm.samples as f64).max(1.0 / Self::MEMORY);
-        arm.mean_ln_ms += weight * (ms.max(1e-3).ln() - arm.mean_ln_ms);
+        let ln_ms = ms.max(1e-3).ln();
+        arm.mean_ln_ms += weight * (ln_ms - arm.mean_ln_ms);
+        arm.mean_sq_ln_ms += weight * (ln_ms * ln_ms - arm.mean_sq_ln_ms);
         arm.ended_first += weight * (f64::from(u8::from(ended_first)) - arm.ended_first);
     }
 
