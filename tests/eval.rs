@@ -31,7 +31,7 @@ fn eval(out: &Path, cache: &Path, extra: &[&str]) -> String {
 }
 
 #[test]
-fn bad_set_and_histogram_values_fail_before_any_extraction() {
+fn bad_set_histogram_and_plan_order_values_fail_before_any_extraction() {
     let dir = tempfile::tempdir().unwrap();
     let (out, cache) = (dir.path().join("out"), dir.path().join("cache"));
     for (args, says) in [
@@ -42,6 +42,10 @@ fn bad_set_and_histogram_values_fail_before_any_extraction() {
             "--histogram peak-mean=abc",
         ),
         (["--histogram", "nope"], "rule `nope` is not in the sweep"),
+        (
+            ["--plan-orders", "2"],
+            "--plan-orders replays a learned coarse pass",
+        ),
     ] {
         let started = std::time::Instant::now();
         let o = run_eval(&out, &cache, &args);
@@ -295,6 +299,8 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
             "place-z=2+verified=12@20",
             "--tiles",
             "2x2+24,auto",
+            "--plan-orders",
+            "4",
             "--no-plots",
         ],
     );
@@ -321,6 +327,28 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
     }
     let md = std::fs::read_to_string(out3.join("results.md")).unwrap();
     assert!(md.contains("% started coarse"), "{md}");
+    // fresh plans over random query orders: the setting asked for (it stops
+    // early), on each seed, four orders of two passes each, every order
+    // through its trials (16 of its searches or more with the coarse pass)
+    let orders = learned["plan_orders"].as_array().unwrap();
+    assert_eq!(orders.len(), 2, "{orders:?}");
+    for row in orders {
+        assert_eq!(row["passes"], 2);
+        assert!(row["full_median_ms"].as_f64().unwrap() > 0.0);
+        let replays = row["orders"].as_array().unwrap();
+        assert_eq!(replays.len(), 4);
+        for o in replays {
+            let started = o["started_coarse"].as_f64().unwrap();
+            assert!(
+                started >= 16.0 / (2 * queries) as f64 && started <= 1.0,
+                "{o}"
+            );
+            assert!(o["median_ms"].as_f64().unwrap() > 0.0, "{o}");
+            assert!(o["recall_at_1"].as_f64().unwrap() > 0.5, "{o}");
+            assert!(o["settled_coarse"].is_boolean(), "{o}");
+        }
+    }
+    assert!(md.contains("## The learned plan over query orders"), "{md}");
 }
 
 #[test]

@@ -68,6 +68,10 @@ pub struct Arm {
     pub mean_ln_ms: f64,
     /// Mean of ln(request time in ms)², averaged as `mean_ln_ms` is.
     pub mean_sq_ln_ms: f64,
+    /// The sum of the squared weights the average gives its samples: the
+    /// variance of the mean is the samples' times this (1/n for a plain
+    /// mean of n, 1/(2·MEMORY − 1) once the moving average is steady).
+    pub sum_sq_weights: f64,
     /// Share of its requests that ended on their first unit (the coarse
     /// pass, or the first tile), averaged as `mean_ln_ms` is.
     pub ended_first: f64,
@@ -80,11 +84,10 @@ impl Arm {
     }
 
     /// The squared standard error of `mean_ln_ms`: the variance of
-    /// ln(ms) over the samples the average remembers (at most
-    /// [`CoarseChoice::MEMORY`]).
+    /// ln(ms) times the sum of the squared weights of the average.
     fn squared_error(&self) -> f64 {
         let variance = (self.mean_sq_ln_ms - self.mean_ln_ms * self.mean_ln_ms).max(0.0);
-        variance / (self.samples as f64).clamp(1.0, CoarseChoice::MEMORY)
+        variance * self.sum_sq_weights
     }
 
     /// A typical ln(ms) drawn from what the arm has cost: normal about its
@@ -152,6 +155,7 @@ impl CoarseChoice {
         arm.samples += 1;
         let weight = (1.0 / arm.samples as f64).max(1.0 / Self::MEMORY);
         let ln_ms = ms.max(1e-3).ln();
+        arm.sum_sq_weights = (1.0 - weight).powi(2) * arm.sum_sq_weights + weight * weight;
         arm.mean_ln_ms += weight * (ln_ms - arm.mean_ln_ms);
         arm.mean_sq_ln_ms += weight * (ln_ms * ln_ms - arm.mean_sq_ln_ms);
         arm.ended_first += weight * (f64::from(u8::from(ended_first)) - arm.ended_first);
@@ -273,6 +277,47 @@ mod tests {
         // the queries change: the coarse pass no longer pays
         run(&c, 2000, 60.0, 90.0);
         assert_eq!(c.preferred(), Some(false));
+    }
+
+    #[test]
+    fn the_standard_error_is_that_of_the_moving_average() {
+        let c = CoarseChoice::default();
+        for k in 0..10 {
+            c.record(false, 10.0 + k as f64, false);
+        }
+        let (plain, _) = c.arms();
+        assert!((plain.sum_sq_weights - 0.1).abs() < 1e-12);
+        for k in 0..2000 {
+            c.record(false, 10.0 + (k % 7) as f64, false);
+        }
+        let (plain, _) = c.arms();
+        let steady = 1.0 / (2.0 * CoarseChoice::MEMORY - 1.0);
+        assert!((plain.sum_sq_weights - steady).abs() < 1e-9, "{plain:?}");
+    }
+
+    #[test]
+    fn a_plan_unlucky_in_its_trials_is_tried_again_until_its_costs_say_so() {
+        // the coarse pass's trials come out slower (8 or 24 ms, typical
+        // 13.9) than the tiles' (10 or 14, typical 11.8), though it costs 6
+        // or 14 ms afterwards (typical 9.2): one exploration in 32 would not
+        // overturn its trials within 200 requests, the draws do
+        let c = CoarseChoice::default();
+        let mut seen = [0usize; 2];
+        let mut used_after_trials = 0;
+        for _ in 0..2 * CoarseChoice::TRIAL + 200 {
+            let coarse = c.choose();
+            let k = seen[coarse as usize];
+            seen[coarse as usize] += 1;
+            let ms = match (coarse, k < CoarseChoice::TRIAL as usize, k % 2 == 0) {
+                (false, _, even) => [14.0, 10.0][even as usize],
+                (true, true, even) => [24.0, 8.0][even as usize],
+                (true, false, even) => [14.0, 6.0][even as usize],
+            };
+            c.record(coarse, ms, coarse);
+            used_after_trials += usize::from(coarse && k >= CoarseChoice::TRIAL as usize);
+        }
+        assert_eq!(c.preferred(), Some(true), "{:?}", c.arms());
+        assert!(used_after_trials > 200 / 2, "{used_after_trials}");
     }
 
     #[test]
