@@ -3,13 +3,14 @@
 # latency and throughput, from one request at a time to a saturated server:
 # a real `bowloc serve` on loopback (the default configuration, gardens-point
 # K = 5000 map of vocabulary seed 1, built on first use) takes gardens-point
-# queries (every 10th, in turn) from wrk with each number of connections,
+# queries (every 10th, in turn) from wrk with each number of connections
+# (AHEAD_DATASET=rtabmap-loop: its K = 1000 map and every one of its queries),
 # once with tiles ahead off and once on, taking turns for ROUNDS rounds so a
 # slow spell of the machine falls on both alike. Prints, per connection
 # count and setting, the medians over rounds of requests per second and of
-# wrk's latency percentiles, and the ratios on/off.
+# wrk's latency percentiles (50, 90 and 99 %), and the ratios on/off.
 #
-#   scripts/ahead.sh [CONNECTIONS,...] [SECONDS] [ROUNDS]
+#   [AHEAD_DATASET=rtabmap-loop] scripts/ahead.sh [CONNECTIONS,...] [SECONDS] [ROUNDS]
 #
 # Defaults: 1,2,4 connections; 10 s; 3 rounds. Run it on a quiet machine.
 set -euo pipefail
@@ -19,13 +20,19 @@ command -v wrk >/dev/null || { echo "wrk missing: apt-get install wrk" >&2; exit
 IFS=, read -ra connection_counts <<<"${1:-1,2,4}"
 seconds=${2:-10}
 rounds=${3:-3}
-gardens_map 5000 1
+dataset=${AHEAD_DATASET:-gardens-point}
+case $dataset in
+  gardens-point) gardens_map 5000 1; map=data/gardens-5000; every=10 ;;
+  rtabmap-loop) load_map 1; map=data/load; every=1 ;;
+  *) echo "AHEAD_DATASET: gardens-point or rtabmap-loop, not $dataset" >&2; exit 2 ;;
+esac
 tmp=$(mktemp -d)
 trap 'stop_server; rm -rf "$tmp"' EXIT
-src=../shared/datasets/gardens-point
+src=../shared/datasets/$dataset
 {
   echo 'local paths = {'
-  awk 'NR % 10 == 1' "$src/queries.txt" | while read -r q; do echo "  \"$src/$q\","; done
+  awk -v every="$every" 'NR % every == 1 % every' "$src/queries.txt" |
+    while read -r q; do echo "  \"$src/$q\","; done
   echo '}'
   cat <<'LUA'
 local bodies = {}
@@ -43,7 +50,7 @@ request = function()
 end
 LUA
 } >"$tmp/post.lua"
-server_config 0 32 data/gardens-5000 "" "" >"$tmp/config.toml"
+server_config 0 32 "$map" "" "" >"$tmp/config.toml"
 # ms from wrk's "50%   12.34ms" lines (us and s converted)
 to_ms() { awk '{v = $2; u = v; sub(/[0-9.]+/, "", u); sub(/[a-z]+$/, "", v);
   if (u == "us") v /= 1000; else if (u == "s") v *= 1000; printf "%.2f\n", v}'; }
@@ -65,26 +72,30 @@ for round in $(seq "$rounds"); do
       stop_server
       rps=$(awk '/Requests\/sec/ {print $2}' "$tmp/wrk.txt")
       p50=$(grep -E '^ +50%' "$tmp/wrk.txt" | to_ms)
+      p90=$(grep -E '^ +90%' "$tmp/wrk.txt" | to_ms)
       p99=$(grep -E '^ +99%' "$tmp/wrk.txt" | to_ms)
       non2xx=$(awk '/Non-2xx/ {n = $NF} END {print n + 0}' "$tmp/wrk.txt")
       echo "round $round: connections=$c tiles_ahead=$ahead requests_per_s=$rps" \
-        "latency_p50=${p50}ms latency_p99=${p99}ms non_2xx=$non2xx tiles_used_ahead=$ahead_used"
-      echo "$c $ahead $rps $p50 $p99" >>"$tmp/rows"
+        "latency_p50=${p50}ms latency_p90=${p90}ms latency_p99=${p99}ms non_2xx=$non2xx" \
+        "tiles_used_ahead=$ahead_used"
+      echo "$c $ahead $rps $p50 $p90 $p99" >>"$tmp/rows"
     done
   done
 done
-echo "$(lscpu | sed -n 's/^Model name: *//p'), $(nproc) CPUs; medians over $rounds rounds of ${seconds} s"
+echo "$dataset; $(lscpu | sed -n 's/^Model name: *//p'), $(nproc) CPUs; medians over $rounds rounds of ${seconds} s"
 for c in "${connection_counts[@]}"; do
   for ahead in false true; do
-    for col in 3 4 5; do
+    for col in 3 4 5 6; do
       awk -v c="$c" -v a="$ahead" -v k="$col" '$1 == c && $2 == a {print $k}' "$tmp/rows" |
         median >"$tmp/m-$ahead-$col"
     done
   done
   read -r rps0 <"$tmp/m-false-3"; read -r rps1 <"$tmp/m-true-3"
   read -r p500 <"$tmp/m-false-4"; read -r p501 <"$tmp/m-true-4"
-  read -r p990 <"$tmp/m-false-5"; read -r p991 <"$tmp/m-true-5"
-  awk -v c="$c" -v r0="$rps0" -v r1="$rps1" -v a0="$p500" -v a1="$p501" -v b0="$p990" -v b1="$p991" \
-    'BEGIN {printf "connections=%s: requests/s %.1f off, %.1f on (%.3fx); p50 %.1f off, %.1f on ms (%.3fx); p99 %.1f off, %.1f on ms (%.3fx)\n",
-      c, r0, r1, r1 / r0, a0, a1, a1 / a0, b0, b1, b1 / b0}'
+  read -r p900 <"$tmp/m-false-5"; read -r p901 <"$tmp/m-true-5"
+  read -r p990 <"$tmp/m-false-6"; read -r p991 <"$tmp/m-true-6"
+  awk -v c="$c" -v r0="$rps0" -v r1="$rps1" -v a0="$p500" -v a1="$p501" -v n0="$p900" -v n1="$p901" \
+    -v b0="$p990" -v b1="$p991" \
+    'BEGIN {printf "connections=%s: requests/s %.1f off, %.1f on (%.3fx); p50 %.1f off, %.1f on ms (%.3fx); p90 %.1f off, %.1f on ms (%.3fx); p99 %.1f off, %.1f on ms (%.3fx)\n",
+      c, r0, r1, r1 / r0, a0, a1, a1 / a0, n0, n1, n1 / n0, b0, b1, b1 / b0}'
 done
