@@ -42,7 +42,9 @@ impl Features {
 pub struct Frame {
     mat: Mat,
     sift: Ptr<SIFT>,
-    /// For a detector of its own on another thread ([`Frame::start`]).
+    /// A second detector, for a region extracted on a second thread
+    /// ([`Frame::detect_two`]); made on first use.
+    second: Option<Ptr<SIFT>>,
     sift_config: super::SiftParams,
     rootsift: bool,
 }
@@ -59,6 +61,7 @@ impl Frame {
         Ok(Self {
             mat,
             sift: detector(&config.sift)?,
+            second: None,
             sift_config: config.sift.clone(),
             rootsift: config.rootsift,
         })
@@ -84,107 +87,92 @@ impl Frame {
         frame_size(&self.mat)
     }
 
-    /// Detect and describe one piece of the frame ([`Piece`]): keypoints in
-    /// frame coordinates, strongest first, at most the piece's cap.
-    pub fn detect(&mut self, piece: Piece) -> Result<Features, FeatureError> {
-        detect_piece(&self.mat, &mut self.sift, self.rootsift, piece)
+    /// Detect and describe inside `r.region` (x, y, width, height, clipped
+    /// to the frame), keeping only keypoints whose centre lies in `r.core`
+    /// (frame coordinates, half-open). Keypoints come back in frame
+    /// coordinates, strongest first, at most `r.cap` of them (0 = all).
+    pub fn detect(&mut self, r: Region) -> Result<Features, FeatureError> {
+        detect_in(&self.mat, &mut self.sift, self.rootsift, r)
     }
 
-    /// Start extracting `piece` on a thread of its own, with a copy of the
-    /// frame and a detector of its own, while this one goes on: the same
-    /// features as [`Frame::detect`], collected with [`Started::wait`].
-    /// Dropped unwaited, the thread finishes on its own and its features
-    /// are lost.
-    pub fn start(&self, piece: Piece) -> Result<Started, FeatureError> {
-        let mat = self.mat.try_clone()?;
-        let (config, rootsift) = (self.sift_config.clone(), self.rootsift);
-        std::thread::Builder::new()
-            .name("bowloc-extract-ahead".into())
-            .spawn(move || {
-                let t = Instant::now();
-                let mut sift = detector(&config)?;
-                detect_piece(&mat, &mut sift, rootsift, piece).map(|f| (f, t.elapsed()))
+    /// [`Frame::detect`] of two regions at once, `b`'s on a second thread
+    /// with a detector of its own: the same features as one after the
+    /// other, each with the time its own extraction took, or its own error.
+    pub fn detect_two(&mut self, a: Region, b: Region) -> [Result<Timed, FeatureError>; 2] {
+        if self.second.is_none() {
+            match detector(&self.sift_config) {
+                Ok(d) => self.second = Some(d),
+                Err(e) => return [self.detect_timed(a), Err(e)],
+            }
+        }
+        let Self {
+            mat,
+            sift,
+            second: Some(second),
+            rootsift,
+            ..
+        } = self
+        else {
+            unreachable!("made above")
+        };
+        let (mat, rootsift) = (&*mat, *rootsift);
+        let timed = |sift: &mut Ptr<SIFT>, r: Region| {
+            let t = Instant::now();
+            detect_in(mat, sift, rootsift, r).map(|f| (f, t.elapsed()))
+        };
+        let (first, other) = std::thread::scope(|s| {
+            let other = s.spawn(|| timed(second, b));
+            (timed(sift, a), other.join())
+        });
+        let other = other.unwrap_or_else(|_| {
+            Err(FeatureError::OpenCv(
+                "the second extraction thread failed".into(),
+            ))
+        });
+        [first, other]
+    }
+
+    /// [`Frame::detect`] of one region, with the time it took.
+    fn detect_timed(&mut self, r: Region) -> Result<Timed, FeatureError> {
+        let t = Instant::now();
+        self.detect(r).map(|f| (f, t.elapsed()))
+    }
+
+    /// Detect and describe on the whole frame downscaled to half its size:
+    /// the keypoints of the coarser scales at about a quarter of the cost,
+    /// returned in frame coordinates.
+    pub fn detect_halved(&mut self, cap: usize) -> Result<Features, FeatureError> {
+        let (fw, fh) = self.size();
+        let (hw, hh) = (fw.div_ceil(2), fh.div_ceil(2));
+        if hw < 2 || hh < 2 {
+            return Ok(Features::empty());
+        }
+        let mut half = Mat::default();
+        opencv::imgproc::resize(
+            &self.mat,
+            &mut half,
+            Size::new(hw as i32, hh as i32),
+            0.0,
+            0.0,
+            opencv::imgproc::INTER_AREA,
+        )?;
+        let (sx, sy) = (fw as f32 / hw as f32, fh as f32 / hh as f32);
+        let place = |k: &KeyPoint| {
+            let p = k.pt();
+            Some(Keypoint {
+                x: (p.x + 0.5) * sx - 0.5,
+                y: (p.y + 0.5) * sy - 0.5,
+                size: k.size() * sx,
+                angle: k.angle(),
+                response: k.response(),
             })
-            .map(Started)
-            .map_err(|e| FeatureError::OpenCv(format!("cannot start an extraction thread: {e}")))
-    }
-}
-
-/// A piece being extracted on a thread of its own ([`Frame::start`]).
-#[derive(Debug)]
-pub struct Started(std::thread::JoinHandle<Result<Timed, FeatureError>>);
-
-impl Started {
-    /// Its features, with the time its extraction took, or its error.
-    pub fn wait(self) -> Result<Timed, FeatureError> {
-        self.0
-            .join()
-            .unwrap_or_else(|_| Err(FeatureError::OpenCv("the extraction thread failed".into())))
+        };
+        describe(&mut self.sift, &half, place, cap, self.rootsift)
     }
 }
 
 /// Features with the time their extraction took.
 pub type Timed = (Features, Duration);
-
-/// What one extraction reads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Piece {
-    /// A region of the frame ([`Region`]).
-    Region(Region),
-    /// The whole frame downscaled to half its size: the keypoints of the
-    /// coarser scales at about a quarter of the cost, at most `cap` of
-    /// them (0 = all).
-    Halved { cap: usize },
-}
-
-/// Detect and describe `piece` of the frame `mat`.
-fn detect_piece(
-    mat: &Mat,
-    sift: &mut Ptr<SIFT>,
-    rootsift: bool,
-    piece: Piece,
-) -> Result<Features, FeatureError> {
-    match piece {
-        Piece::Region(r) => detect_in(mat, sift, rootsift, r),
-        Piece::Halved { cap } => detect_halved(mat, sift, rootsift, cap),
-    }
-}
-
-/// Detect and describe on the whole frame `mat` downscaled to half its
-/// size, keypoints returned in frame coordinates.
-fn detect_halved(
-    mat: &Mat,
-    sift: &mut Ptr<SIFT>,
-    rootsift: bool,
-    cap: usize,
-) -> Result<Features, FeatureError> {
-    let (fw, fh) = frame_size(mat);
-    let (hw, hh) = (fw.div_ceil(2), fh.div_ceil(2));
-    if hw < 2 || hh < 2 {
-        return Ok(Features::empty());
-    }
-    let mut half = Mat::default();
-    opencv::imgproc::resize(
-        mat,
-        &mut half,
-        Size::new(hw as i32, hh as i32),
-        0.0,
-        0.0,
-        opencv::imgproc::INTER_AREA,
-    )?;
-    let (sx, sy) = (fw as f32 / hw as f32, fh as f32 / hh as f32);
-    let place = |k: &KeyPoint| {
-        let p = k.pt();
-        Some(Keypoint {
-            x: (p.x + 0.5) * sx - 0.5,
-            y: (p.y + 0.5) * sy - 0.5,
-            size: k.size() * sx,
-            angle: k.angle(),
-            response: k.response(),
-        })
-    };
-    describe(sift, &half, place, cap, rootsift)
-}
 
 /// One region to extract: the pixels SIFT sees, the core whose keypoints
 /// are kept, and how many of them at most.
@@ -212,10 +200,6 @@ fn frame_size(mat: &Mat) -> (u32, u32) {
 }
 
 /// [`Frame::detect`] on `mat` with the detector `sift`.
-/// Detect and describe inside `r.region` (x, y, width, height, clipped
-/// to the frame), keeping only keypoints whose centre lies in `r.core`
-/// (frame coordinates, half-open). Keypoints come back in frame
-/// coordinates, strongest first, at most `r.cap` of them (0 = all).
 fn detect_in(
     mat: &Mat,
     sift: &mut Ptr<SIFT>,
@@ -304,11 +288,11 @@ pub fn extract(image: &GrayImage, config: &ExtractConfig) -> Result<Features, Fe
     let mut frame = Frame::new(image, config)?;
     let (w, h) = frame.size();
     let all = (0, 0, w, h);
-    frame.detect(Piece::Region(Region {
+    frame.detect(Region {
         region: all,
         core: all,
         cap: config.sift.max_features as usize,
-    }))
+    })
 }
 
 /// Decode a file and extract its features.

@@ -16,9 +16,7 @@ pub use buffers::{Buffers, KEEP_BUFFERS_VAR, keep_image_buffers};
 pub use coarse_choice::CoarseChoice;
 pub use config::{ExtractConfig, SiftParams};
 pub use decode::{DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe};
-pub use extract::{
-    Descriptors, Features, Frame, Piece, Region, Started, Timed, extract, extract_file,
-};
+pub use extract::{Descriptors, Features, Frame, Region, Timed, extract, extract_file};
 pub use thumbnail::thumbnail;
 pub use tiles::{TileGrid, TilePlan, Tiles, TilesAhead};
 

@@ -12,14 +12,11 @@
 //! ([`crate::search::Search::feed_tile`]): an answer not taken on the
 //! coarse pass is the tiles alone's.
 //!
-//! A core that would otherwise idle may extract the unit after the next one
-//! (the first tile, after a coarse pass) at the same time
-//! ([`Tiles::extract_ahead`]); it is handed out in its turn, so the search
-//! sees the same features in the same order either way.
+//! A core that would otherwise idle may extract the tile after the next one
+//! at the same time ([`Tiles::extract_ahead`]); it is handed out in its turn,
+//! so the search sees the same features in the same order either way.
 
-use super::{
-    ExtractConfig, FeatureError, Features, Frame, GrayImage, Piece, Region, Started, Timed,
-};
+use super::{ExtractConfig, FeatureError, Features, Frame, GrayImage, Region, Timed};
 use crate::search::permute::{self, TileGuide, TileOrder};
 use serde::{Deserialize, Serialize};
 use std::time::{Duration, Instant};
@@ -268,9 +265,9 @@ pub struct Tiles {
     cap: usize,
     /// Extract two tiles at a time ([`Tiles::extract_ahead`]).
     two_at_a_time: bool,
-    /// A unit being extracted ahead on another thread, by its place in the
-    /// order, waiting its turn.
-    ahead: Option<(usize, Started)>,
+    /// A unit extracted ahead, by its place in the order, with the time it
+    /// took (or its error), waiting its turn.
+    ahead: Option<(usize, Result<Timed, FeatureError>)>,
     /// What the unit handed out last took to extract, on its own thread.
     last_time: Duration,
     /// Tiles extracted ahead so far.
@@ -410,12 +407,12 @@ impl Tiles {
         &self.shares[self.next.min(self.shares.len())..]
     }
 
-    /// From now on (`true`) extract the next unit together with the one
+    /// From now on (`true`) extract the next tile together with the one
     /// after it, on a second thread, keeping that one for the next call; or
-    /// (`false`) one unit at a time. The features are the same either way:
+    /// (`false`) one tile at a time. The features are the same either way:
     /// two at a time only uses a core that would otherwise idle, and a tile
     /// extracted ahead of a stop is never handed out. A coarse pass is
-    /// extracted together with the first tile.
+    /// always extracted alone.
     pub fn extract_ahead(&mut self, two_at_a_time: bool) {
         self.two_at_a_time = two_at_a_time;
     }
@@ -439,35 +436,29 @@ impl Tiles {
         let k = self.next;
         let &unit = self.order.get(k)?;
         self.next += 1;
-        if let Some((at, extracting)) = self.ahead.take()
+        if let Some((at, extracted)) = self.ahead.take()
             && at == k
         {
-            return Some(self.handed_out(extracting.wait()));
+            return Some(self.handed_out(extracted));
         }
-        // the unit after this one on another thread, this one here: handed
-        // out as soon as it is done, the other waited for in its turn (a
-        // thread that cannot start leaves one unit at a time)
-        if self.two_at_a_time
-            && let Some(&after) = self.order.get(k + 1)
-            && let Ok(extracting) = self.frame.start(self.piece(after, k + 1))
-        {
-            self.ahead = Some((k + 1, extracting));
-            self.extracted_ahead += 1;
-        }
-        let piece = self.piece(unit, k);
         let started = Instant::now();
-        let features = self.frame.detect(piece);
+        let cap = self.tile_cap(k);
+        let features = match (unit, self.order.get(k + 1)) {
+            (Unit::Coarse, _) => self.frame.detect_halved(cap),
+            (Unit::Tile(tile), Some(&Unit::Tile(after))) if self.two_at_a_time => {
+                let (a, b) = (
+                    self.region(tile, cap),
+                    self.region(after, self.tile_cap(k + 1)),
+                );
+                let [first, next] = self.frame.detect_two(a, b);
+                self.ahead = Some((k + 1, next));
+                self.extracted_ahead += 1;
+                return Some(self.handed_out(first));
+            }
+            (Unit::Tile(tile), _) => self.frame.detect(self.region(tile, cap)),
+        };
         self.last_time = started.elapsed();
         Some(features)
-    }
-
-    /// What `unit`, the k-th extracted, reads.
-    fn piece(&self, unit: Unit, k: usize) -> Piece {
-        let cap = self.tile_cap(k);
-        match unit {
-            Unit::Coarse => Piece::Halved { cap },
-            Unit::Tile(tile) => Piece::Region(self.region(tile, cap)),
-        }
     }
 
     /// Hand out a unit extracted with its time.
