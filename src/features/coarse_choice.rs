@@ -28,6 +28,7 @@
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
 use std::sync::Mutex;
 
 /// The running choice between a grid without and with the coarse pass.
@@ -93,10 +94,7 @@ impl Arm {
     /// A typical ln(ms) drawn from what the arm has cost: normal about its
     /// mean with its standard error.
     fn draw(&self, rng: &mut ChaCha8Rng) -> f64 {
-        // Box–Muller
-        let u: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
-        let v: f64 = rng.random();
-        let z = (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos();
+        let z: f64 = rng.sample(StandardNormal);
         self.mean_ln_ms + z * self.squared_error().sqrt()
     }
 }
