@@ -65,6 +65,11 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// Whether the grid is the learned coarse pass's choice.
+    pub fn learned(&self) -> bool {
+        self.learned
+    }
+
     /// The grid a caller asked for: nothing to learn from.
     pub fn asked(grid: TileGrid) -> Self {
         Self {

@@ -45,6 +45,7 @@ pub const MAP_POSTINGS: &str = "bowloc_map_postings";
 pub const BUILD_INFO: &str = "bowloc_build_info";
 pub const SEQUENCES: &str = "bowloc_sequences_live";
 pub const PLAN_COST: &str = "bowloc_extraction_plan_typical_seconds";
+pub const PLAN_REQUESTS: &str = "bowloc_extraction_plan_requests_total";
 pub const KEYPOINT_COST: &str = "bowloc_tile_keypoint_seconds";
 pub const FIRST_TILES_COST: &str = "bowloc_tile_first_tiles_seconds";
 pub const SEQUENCE_EVICTIONS: &str = "bowloc_sequence_evictions_total";
@@ -181,6 +182,10 @@ fn describe() {
         Unit::Seconds,
         "Typical request time (geometric mean, without decoding) of streaming extraction with and without the coarse pass, as the learned choice (search.tiles ending in ,auto) sees it."
     );
+    describe_counter!(
+        PLAN_REQUESTS,
+        "Requests whose extraction plan the learned choice (search.tiles ending in ,auto) drew, by plan: tiles alone or the coarse pass first."
+    );
     describe_gauge!(
         KEYPOINT_COST,
         Unit::Seconds,
@@ -263,6 +268,9 @@ fn zero_counters() {
     }
     for verified in ["true", "false"] {
         counter!(VERIFIED, "verified" => verified).absolute(0);
+    }
+    for plan in ["tiles", "coarse"] {
+        counter!(PLAN_REQUESTS, "plan" => plan).absolute(0);
     }
     for reason in ["capacity", "idle"] {
         counter!(SEQUENCE_EVICTIONS, "reason" => reason).absolute(0);
@@ -354,8 +362,13 @@ pub fn localized(answer: &Localization) {
     }
 }
 
-/// What the learned coarse pass has measured of each plan.
-pub fn coarse_choice(choice: &crate::features::CoarseChoice) {
+/// The plan the learned coarse pass drew for a request, and what it has
+/// measured of each plan.
+pub fn coarse_choice(choice: &crate::features::CoarseChoice, plan: &crate::pipeline::Plan) {
+    if plan.learned() {
+        let drawn = if plan.grid.coarse { "coarse" } else { "tiles" };
+        counter!(PLAN_REQUESTS, "plan" => drawn).increment(1);
+    }
     let (tiles, coarse) = choice.arms();
     for (plan, arm) in [("tiles", tiles), ("coarse", coarse)] {
         if arm.samples > 0 {

@@ -494,6 +494,8 @@ done
 check "process_cpu_seconds_total is typed a counter" grep -qx '# TYPE process_cpu_seconds_total counter' "$TMP/metrics.txt"
 check "metrics is Prometheus text" sh -c "curl -s -D - -o /dev/null '$BASE/metrics' | grep -qi '^content-type: text/plain; version=0.0.4'"
 check "map gauge holds the map size" grep -qx 'bowloc_map_images 40' "$TMP/metrics.txt"
+check "the learned plan's draws are counted, both plans (its trials alternate)" \
+  awk '$1 ~ /^bowloc_extraction_plan_requests_total\{plan="(tiles|coarse)"\}$/ && $2 > 0 { n++ } END { exit n != 2 }' "$TMP/metrics.txt"
 check "the learnt cost of a keypoint is exported, above 0 and under a millisecond" \
   awk '$1 == "bowloc_tile_keypoint_seconds" && $2 > 0 && $2 < 0.001 { found = 1 } END { exit !found }' "$TMP/metrics.txt"
 check "what the first three tiles take is exported, above 0 and under a second" \

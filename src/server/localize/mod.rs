@@ -168,7 +168,7 @@ pub async fn localize(
     }
     localizer.learn(plan, &answer);
     if let Some(choice) = &localizer.coarse_choice {
-        super::metrics::coarse_choice(choice);
+        super::metrics::coarse_choice(choice, &plan);
     }
     super::metrics::tile_cost(localizer.tile_cost());
     let mut answer = answer;
