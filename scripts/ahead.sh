@@ -83,19 +83,17 @@ for round in $(seq "$rounds"); do
   done
 done
 echo "$dataset; $(lscpu | sed -n 's/^Model name: *//p'), $(nproc) CPUs; medians over $rounds rounds of ${seconds} s"
+# per connection count, each column's median over rounds off and on, and on/off
 for c in "${connection_counts[@]}"; do
-  for ahead in false true; do
-    for col in 3 4 5 6; do
-      awk -v c="$c" -v a="$ahead" -v k="$col" '$1 == c && $2 == a {print $k}' "$tmp/rows" |
-        median >"$tmp/m-$ahead-$col"
-    done
+  line="connections=$c:"
+  sep=""
+  for col in "3 requests/s " "4 p50 ms" "5 p90 ms" "6 p99 ms"; do
+    read -r k name unit <<<"$col"
+    off=$(awk -v c="$c" -v k="$k" '$1 == c && $2 == "false" {print $k}' "$tmp/rows" | median)
+    on=$(awk -v c="$c" -v k="$k" '$1 == c && $2 == "true" {print $k}' "$tmp/rows" | median)
+    line+=$(awk -v n="$name" -v u="${unit:+ $unit}" -v a="$off" -v b="$on" -v s="$sep" \
+      'BEGIN {printf "%s %s %.1f off, %.1f on%s (%.3fx)", s, n, a, b, u, b / a}')
+    sep=";"
   done
-  read -r rps0 <"$tmp/m-false-3"; read -r rps1 <"$tmp/m-true-3"
-  read -r p500 <"$tmp/m-false-4"; read -r p501 <"$tmp/m-true-4"
-  read -r p900 <"$tmp/m-false-5"; read -r p901 <"$tmp/m-true-5"
-  read -r p990 <"$tmp/m-false-6"; read -r p991 <"$tmp/m-true-6"
-  awk -v c="$c" -v r0="$rps0" -v r1="$rps1" -v a0="$p500" -v a1="$p501" -v n0="$p900" -v n1="$p901" \
-    -v b0="$p990" -v b1="$p991" \
-    'BEGIN {printf "connections=%s: requests/s %.1f off, %.1f on (%.3fx); p50 %.1f off, %.1f on ms (%.3fx); p90 %.1f off, %.1f on ms (%.3fx); p99 %.1f off, %.1f on ms (%.3fx)\n",
-      c, r0, r1, r1 / r0, a0, a1, a1 / a0, n0, n1, n1 / n0, b0, b1, b1 / b0}'
+  echo "$line"
 done

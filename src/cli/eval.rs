@@ -202,21 +202,14 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         }
     }
     for r in &report.plan_orders {
-        let settled = r.orders.iter().filter(|o| o.settled_coarse == Some(true));
-        let ratios: Vec<f64> = r
-            .orders
-            .iter()
-            .map(|o| o.median_ms / r.full_median_ms)
-            .collect();
+        let [lo, _, hi] = r.spread(|o| r.ratio(o));
         println!(
             "{}, vocabulary seed {}: {} of {} query orders settled on the coarse pass; \
-             median request {:.3} to {:.3} of the whole-image full search's",
+             median request {lo:.3} to {hi:.3} of the whole-image full search's",
             r.label,
             r.seed,
-            settled.count(),
+            r.settled_coarse(),
             r.orders.len(),
-            ratios.iter().copied().fold(f64::INFINITY, f64::min),
-            ratios.iter().copied().fold(f64::NEG_INFINITY, f64::max),
         );
     }
     println!("{}", config.out.join("results.md").display());

@@ -725,6 +725,17 @@ fn replay_plan_orders(
         (replayed.len() * maps.len()) as u64,
         "replaying the learned plan over query orders",
     );
+    // per seed, the whole-image full search's median request (the tiled
+    // one's when the queries were not also extracted whole)
+    let full_medians: Vec<f64> = (0..maps.len())
+        .map(|s| {
+            let full = swept
+                .whole
+                .as_ref()
+                .map_or(&swept.full_ms[s], |(_, w)| &w[s]);
+            timing::median(&full.iter().flatten().copied().collect::<Vec<_>>())
+        })
+        .collect();
     let mut rows = Vec::new();
     for &i in &replayed {
         let setting = &plan.settings[i];
@@ -733,15 +744,10 @@ fn replay_plan_orders(
                 plain: (&words.plain[s].queries, &words.plain[s].costs),
                 coarse: (&coarse[s].queries, &coarse[s].costs),
             };
-            let full = swept
-                .whole
-                .as_ref()
-                .map_or(&swept.full_ms[s], |(_, w)| &w[s]);
-            let full: Vec<f64> = full.iter().flatten().copied().collect();
             rows.push(plan_orders::PlanOrders {
                 label: setting.label(),
                 seed: seeds[s],
-                full_median_ms: timing::median(&full),
+                full_median_ms: full_medians[s],
                 passes: config.runs,
                 orders: plan_orders::replay(
                     map,

@@ -49,6 +49,30 @@ pub struct PlanOrders {
     pub orders: Vec<OrderReplay>,
 }
 
+impl PlanOrders {
+    /// Orders whose plan preferred the coarse pass after the last query.
+    pub fn settled_coarse(&self) -> usize {
+        let settled = self
+            .orders
+            .iter()
+            .filter(|o| o.settled_coarse == Some(true));
+        settled.count()
+    }
+
+    /// A figure of every order: its min, median and max over the orders.
+    pub fn spread(&self, figure: impl Fn(&OrderReplay) -> f64) -> [f64; 3] {
+        let v: Vec<f64> = self.orders.iter().map(figure).collect();
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        [lo, median(&v), hi]
+    }
+
+    /// Each order's median request against the whole-image full search's.
+    pub fn ratio(&self, o: &OrderReplay) -> f64 {
+        o.median_ms / self.full_median_ms
+    }
+}
+
 /// Replay `orders` fresh plans of `setting`, each over `passes` passes of
 /// the queries, every pass in a random order of its own (the sweep's runs,
 /// shuffled); pass p of order k draws the feature orders of the sweep's run
@@ -113,27 +137,21 @@ pub fn markdown(rows: &[PlanOrders]) -> String {
         first.passes,
         first.orders.len()
     );
+    let pct = |v: f64| format!("{:.1} %", 100.0 * v);
+    let ratio = |v: f64| format!("{v:.3}");
+    let show = |[lo, mid, hi]: [f64; 3], f: &dyn Fn(f64) -> String| {
+        format!("{} / {} / {}", f(lo), f(mid), f(hi))
+    };
     for r in rows {
-        let spread = |f: &dyn Fn(&OrderReplay) -> f64, show: &dyn Fn(f64) -> String| {
-            let v: Vec<f64> = r.orders.iter().map(f).collect();
-            let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
-            let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            format!("{} / {} / {}", show(lo), show(median(&v)), show(hi))
-        };
-        let settled = r
-            .orders
-            .iter()
-            .filter(|o| o.settled_coarse == Some(true))
-            .count();
-        let pct = |v: f64| format!("{:.1} %", 100.0 * v);
         out.push_str(&format!(
-            "| {} | {} | {settled} of {} | {} | {} | {} |\n",
+            "| {} | {} | {} of {} | {} | {} | {} |\n",
             r.label,
             r.seed,
+            r.settled_coarse(),
             r.orders.len(),
-            spread(&|o| o.started_coarse, &pct),
-            spread(&|o| o.median_ms / r.full_median_ms, &|v| format!("{v:.3}")),
-            spread(&|o| o.recall_at_1, &pct),
+            show(r.spread(|o| o.started_coarse), &pct),
+            show(r.spread(|o| r.ratio(o)), &ratio),
+            show(r.spread(|o| o.recall_at_1), &pct),
         ));
     }
     out

@@ -668,19 +668,22 @@ pub fn learned_search(
     ranking: Ranking,
 ) -> Outcome {
     let coarse = choice.is_some_and(CoarseChoice::choose);
-    let (queries, costs) = if coarse { plan.coarse } else { plan.plain };
-    let o = search_query(map, &queries[query], setting, seed, ranking);
+    let o = search_query(map, &plan.side(coarse).0[query], setting, seed, ranking);
     if let Some(choice) = choice {
-        choice.record(coarse, served_ms(&o, &costs[query]), o.tiles <= 1);
+        choice.record(coarse, served_ms(&o, plan.cost(&o, query)), o.tiles <= 1);
     }
     o
 }
 
-impl LearnedPlan<'_> {
+impl<'a> LearnedPlan<'a> {
+    /// The queries and costs without (`false`) or with the coarse pass.
+    fn side(&self, coarse: bool) -> (&'a [Query], &'a [QueryCost]) {
+        if coarse { self.coarse } else { self.plain }
+    }
+
     /// What query `query` cost in the plan its outcome `o` was searched in.
-    pub fn cost(&self, o: &Outcome, query: usize) -> &QueryCost {
-        let (_, costs) = if o.coarse { self.coarse } else { self.plain };
-        &costs[query]
+    pub fn cost(&self, o: &Outcome, query: usize) -> &'a QueryCost {
+        &self.side(o.coarse).1[query]
     }
 }
 

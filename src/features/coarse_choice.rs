@@ -69,10 +69,6 @@ pub struct Arm {
     pub mean_ln_ms: f64,
     /// Mean of ln(request time in ms)², averaged as `mean_ln_ms` is.
     pub mean_sq_ln_ms: f64,
-    /// The sum of the squared weights the average gives its samples: the
-    /// variance of the mean is the samples' times this (1/n for a plain
-    /// mean of n, 1/(2·MEMORY − 1) once the moving average is steady).
-    pub sum_sq_weights: f64,
     /// Share of its requests that ended on their first unit (the coarse
     /// pass, or the first tile), averaged as `mean_ln_ms` is.
     pub ended_first: f64,
@@ -84,11 +80,28 @@ impl Arm {
         self.mean_ln_ms.exp()
     }
 
+    /// The sum of the squared weights the average gives its samples: the
+    /// variance of the mean is the samples' times this. 1/n for the plain
+    /// mean of the first n ≤ MEMORY; then each sample scales the old
+    /// weights by 1 − w and adds w (w = 1/MEMORY), so the sum moves from
+    /// 1/MEMORY towards its fixed point w²/(1 − (1 − w)²) = 1/(2·MEMORY − 1)
+    /// by (1 − w)² a sample.
+    pub fn sum_sq_weights(&self) -> f64 {
+        let memory = CoarseChoice::MEMORY;
+        let n = self.samples as f64;
+        if n <= memory {
+            return 1.0 / n.max(1.0);
+        }
+        let shrink = (1.0 - 1.0 / memory).powi(2);
+        let steady = 1.0 / (2.0 * memory - 1.0);
+        steady + (1.0 / memory - steady) * shrink.powf(n - memory)
+    }
+
     /// The squared standard error of `mean_ln_ms`: the variance of
     /// ln(ms) times the sum of the squared weights of the average.
     fn squared_error(&self) -> f64 {
         let variance = (self.mean_sq_ln_ms - self.mean_ln_ms * self.mean_ln_ms).max(0.0);
-        variance * self.sum_sq_weights
+        variance * self.sum_sq_weights()
     }
 
     /// A typical ln(ms) drawn from what the arm has cost: normal about its
@@ -113,6 +126,8 @@ impl CoarseChoice {
     /// The coarse pass is preferred only when more than this share of its
     /// requests ended on it.
     pub const MIN_ENDED_ON_COARSE: f64 = 0.5;
+    /// The plans' names (in `/metrics`), without and with the coarse pass.
+    pub const PLANS: [&'static str; 2] = ["tiles", "coarse"];
 
     /// Whether the next request should start with the coarse pass.
     pub fn choose(&self) -> bool {
@@ -153,7 +168,6 @@ impl CoarseChoice {
         arm.samples += 1;
         let weight = (1.0 / arm.samples as f64).max(1.0 / Self::MEMORY);
         let ln_ms = ms.max(1e-3).ln();
-        arm.sum_sq_weights = (1.0 - weight).powi(2) * arm.sum_sq_weights + weight * weight;
         arm.mean_ln_ms += weight * (ln_ms - arm.mean_ln_ms);
         arm.mean_sq_ln_ms += weight * (ln_ms * ln_ms - arm.mean_sq_ln_ms);
         arm.ended_first += weight * (f64::from(u8::from(ended_first)) - arm.ended_first);
@@ -284,13 +298,29 @@ mod tests {
             c.record(false, 10.0 + k as f64, false);
         }
         let (plain, _) = c.arms();
-        assert!((plain.sum_sq_weights - 0.1).abs() < 1e-12);
+        assert!((plain.sum_sq_weights() - 0.1).abs() < 1e-12);
+        // against the weights themselves, sample by sample: 1/n, then each
+        // old weight times 1 − w and the new one w
+        let w = 1.0 / CoarseChoice::MEMORY;
+        let mut weights = vec![0.1; 10];
         for k in 0..2000 {
             c.record(false, 10.0 + (k % 7) as f64, false);
+            let n = 11 + k;
+            let new = (1.0 / n as f64).max(w);
+            weights.iter_mut().for_each(|x| *x *= 1.0 - new);
+            weights.push(new);
+            if k % 97 == 0 || k == 1999 {
+                let (plain, _) = c.arms();
+                let sum: f64 = weights.iter().map(|x| x * x).sum();
+                assert!(
+                    (plain.sum_sq_weights() - sum).abs() < 1e-12,
+                    "{k}: {plain:?}"
+                );
+            }
         }
         let (plain, _) = c.arms();
         let steady = 1.0 / (2.0 * CoarseChoice::MEMORY - 1.0);
-        assert!((plain.sum_sq_weights - steady).abs() < 1e-9, "{plain:?}");
+        assert!((plain.sum_sq_weights() - steady).abs() < 1e-9, "{plain:?}");
     }
 
     #[test]

@@ -269,7 +269,7 @@ fn zero_counters() {
     for verified in ["true", "false"] {
         counter!(VERIFIED, "verified" => verified).absolute(0);
     }
-    for plan in ["tiles", "coarse"] {
+    for plan in crate::features::CoarseChoice::PLANS {
         counter!(PLAN_REQUESTS, "plan" => plan).absolute(0);
     }
     for reason in ["capacity", "idle"] {
@@ -365,12 +365,13 @@ pub fn localized(answer: &Localization) {
 /// The plan the learned coarse pass drew for a request, and what it has
 /// measured of each plan.
 pub fn coarse_choice(choice: &crate::features::CoarseChoice, plan: &crate::pipeline::Plan) {
+    use crate::features::CoarseChoice;
     if plan.learned() {
-        let drawn = if plan.grid.coarse { "coarse" } else { "tiles" };
+        let drawn = CoarseChoice::PLANS[usize::from(plan.grid.coarse)];
         counter!(PLAN_REQUESTS, "plan" => drawn).increment(1);
     }
     let (tiles, coarse) = choice.arms();
-    for (plan, arm) in [("tiles", tiles), ("coarse", coarse)] {
+    for (plan, arm) in CoarseChoice::PLANS.into_iter().zip([tiles, coarse]) {
         if arm.samples > 0 {
             gauge!(PLAN_COST, "plan" => plan).set(arm.typical_ms() / 1e3);
         }
