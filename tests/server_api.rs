@@ -639,3 +639,88 @@ async fn a_frame_of_a_sequence_warms_up_as_the_map_images_say() {
     config.sequence.min_features = bowloc::calibrate::Warmup::Features(7);
     assert_eq!(warm_up(config, "fixed").await, 7);
 }
+
+#[tokio::test]
+async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_changed() {
+    use bowloc::server::plan_memory::{PlanMemory, Restored, path_for};
+    // a copy of the map, so that its plan file is this test's own
+    let dir = tempfile::tempdir().unwrap();
+    let (v, m) = files();
+    let map = dir.path().join("m.bowmap");
+    std::fs::copy(m, &map).unwrap();
+    let config = || {
+        let mut config = Config::default();
+        config.files.vocabulary = v.clone();
+        config.files.map = map.clone();
+        config.bootstrap.enabled = false;
+        config.server.workers = 1;
+        config.search.tiles = "2x2+24,auto".into();
+        config
+    };
+    let serve = |config: Config| {
+        let localizer = bowloc::server::bootstrap::load(&config, &Default::default()).unwrap();
+        let state = AppState::new(config).unwrap();
+        state.set_localizer(localizer);
+        state
+    };
+    let learned = |state: &Arc<AppState>| {
+        let localizer = state.localizer().unwrap();
+        localizer.coarse_choice.as_ref().unwrap().learned()
+    };
+    let first = serve(config());
+    let trials = 2 * bowloc::features::CoarseChoice::TRIAL;
+    for seed in 0..trials + 4 {
+        let query = format!("seed={seed}");
+        let (status, _, _) = send(&first, localize(&query, "application/json")).await;
+        assert_eq!(status, StatusCode::OK);
+    }
+    let kept = learned(&first);
+    assert_eq!(kept.requests, trials + 4);
+    assert!(!path_for(&map).exists());
+    first.keep_plan().await;
+    let text = std::fs::read_to_string(path_for(&map)).unwrap();
+    let saved: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(saved["learned"]["requests"], trials + 4, "{text}");
+
+    // the same map, machine and settings: no trials
+    let second = serve(config());
+    assert_eq!(learned(&second), kept);
+    let (status, _, _) = send(&second, localize("seed=99", "application/json")).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(learned(&second).requests, trials + 5);
+
+    // other settings: the trials again, the file as it was
+    let mut other = config();
+    other.search.top_n = 3;
+    let third = serve(other.clone());
+    assert_eq!(learned(&third).requests, 0);
+    let memory = PlanMemory::of(&other).unwrap();
+    let localizer = bowloc::server::bootstrap::load(&other, &Default::default()).unwrap();
+    assert_eq!(
+        memory.restore(&localizer),
+        Restored::Ignored("learned for other settings".into())
+    );
+    // another map at the same path
+    let mut saved: serde_json::Value = serde_json::from_str(&text).unwrap();
+    saved["context"]["map"] = "0123456789abcdef".into();
+    std::fs::write(path_for(&map), saved.to_string()).unwrap();
+    let memory = PlanMemory::of(&config()).unwrap();
+    let localizer = bowloc::server::bootstrap::load(&config(), &Default::default()).unwrap();
+    assert_eq!(
+        memory.restore(&localizer),
+        Restored::Ignored("learned for another map".into())
+    );
+    // a damaged file: the trials, and the service answers
+    std::fs::write(path_for(&map), &text[..text.len() / 2]).unwrap();
+    let damaged = serve(config());
+    assert_eq!(learned(&damaged).requests, 0);
+    let (status, _, _) = send(&damaged, localize("seed=1", "application/json")).await;
+    assert_eq!(status, StatusCode::OK);
+    // a plan not to be kept has no memory
+    let mut forget = config();
+    forget.search.remember_plan = false;
+    assert!(PlanMemory::of(&forget).is_none());
+    let mut fixed = config();
+    fixed.search.tiles = "2x2+24".into();
+    assert!(PlanMemory::of(&fixed).is_none());
+}

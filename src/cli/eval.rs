@@ -204,10 +204,11 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
     for r in &report.plan_orders {
         let [lo, _, hi] = r.spread(|o| r.ratio(o));
         println!(
-            "{}, vocabulary seed {}: {} of {} query orders settled on the coarse pass; \
+            "{}, vocabulary seed {}, {} servers: {} of {} query orders settled on the coarse pass; \
              median request {lo:.3} to {hi:.3} of the whole-image full search's",
             r.label,
             r.seed,
+            r.start.name(),
             r.settled_coarse(),
             r.orders.len(),
         );

@@ -697,7 +697,7 @@ fn sweep_settings(
 /// Stage 3c ([`plan_orders`]): with a learned coarse pass and
 /// `plan_orders` asked for, every setting asked for that stops early (the
 /// one re-ranked by verification, when verification is on) replayed as
-/// fresh plans over random query orders, on every vocabulary.
+/// fresh and restarted plans over random query orders, on every vocabulary.
 #[allow(clippy::too_many_arguments)]
 fn replay_plan_orders(
     config: &EvalConfig,
@@ -744,21 +744,23 @@ fn replay_plan_orders(
                 plain: (&words.plain[s].queries, &words.plain[s].costs),
                 coarse: (&coarse[s].queries, &coarse[s].costs),
             };
-            rows.push(plan_orders::PlanOrders {
-                label: setting.label(),
-                seed: seeds[s],
-                full_median_ms: full_medians[s],
-                passes: config.runs,
-                orders: plan_orders::replay(
-                    map,
-                    learned,
-                    setting,
-                    config.plan_orders,
-                    config.runs,
-                    &dataset.truth,
-                    ranking,
-                ),
-            });
+            let replayed = plan_orders::Replayed {
+                map,
+                plan: learned,
+                setting,
+                truth: &dataset.truth,
+                ranking,
+            };
+            for start in plan_orders::Start::BOTH {
+                rows.push(plan_orders::PlanOrders {
+                    label: setting.label(),
+                    start,
+                    seed: seeds[s],
+                    full_median_ms: full_medians[s],
+                    passes: config.runs,
+                    orders: plan_orders::replay(replayed, start, config.plan_orders, config.runs),
+                });
+            }
             bar.inc(1);
         }
     }

@@ -6,6 +6,10 @@
 //! N`), and each order reports the share of its
 //! searches started with the coarse pass, the plan it settled on, its median
 //! request time against the whole-image full search's, and its recall@1.
+//! The same orders are also replayed on restarted servers
+//! ([`Start::Restarted`]): each goes on from the plan a server kept after
+//! seeing the queries as often in another random order, as the service
+//! does with `search.remember_plan`.
 
 use super::metrics;
 use super::summary::{answers, stage_sample};
@@ -35,10 +39,33 @@ pub struct OrderReplay {
     pub recall_at_1: f64,
 }
 
+/// How each order's plan starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Start {
+    /// A server just started for the first time: the plan runs its trials.
+    Fresh,
+    /// A server restarted: the plan goes on from what another served its
+    /// passes over the queries in another random order learned.
+    Restarted,
+}
+
+impl Start {
+    pub const BOTH: [Start; 2] = [Start::Fresh, Start::Restarted];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Start::Fresh => "fresh",
+            Start::Restarted => "restarted",
+        }
+    }
+}
+
 /// A setting's replays over query orders on one vocabulary.
 #[derive(Debug, Clone, Serialize)]
 pub struct PlanOrders {
     pub label: String,
+    pub start: Start,
     /// The vocabulary's k-means seed.
     pub seed: u64,
     /// Median request time of the whole-image full search (every run and
@@ -73,42 +100,35 @@ impl PlanOrders {
     }
 }
 
-/// Replay `orders` fresh plans of `setting`, each over `passes` passes of
-/// the queries, every pass in a random order of its own (the sweep's runs,
-/// shuffled); pass p of order k draws the feature orders of the sweep's run
-/// k·passes + p. Request times and recall@1 are over every search.
-pub fn replay(
-    map: &MapIndex,
-    plan: LearnedPlan<'_>,
-    setting: &Setting,
-    orders: u32,
-    passes: u32,
-    truth: &[HashSet<u32>],
-    ranking: Ranking,
-) -> Vec<OrderReplay> {
-    let n = plan.plain.0.len();
+/// What a learned search in the service's configuration needs to replay.
+#[derive(Clone, Copy)]
+pub struct Replayed<'a> {
+    pub map: &'a MapIndex,
+    pub plan: LearnedPlan<'a>,
+    pub setting: &'a Setting,
+    pub truth: &'a [HashSet<u32>],
+    pub ranking: Ranking,
+}
+
+/// Replay `orders` plans of `setting` started as `start` says, each over
+/// `passes` passes of the queries, every pass in a random order of its own
+/// (the sweep's runs, shuffled); pass p of order k draws the feature orders
+/// of the sweep's run k·passes + p. A restarted plan first learns from
+/// `passes` passes in the orders of runs past the replayed ones. Request
+/// times and recall@1 are over the replayed searches.
+pub fn replay(r: Replayed<'_>, start: Start, orders: u32, passes: u32) -> Vec<OrderReplay> {
     (0..orders)
         .into_par_iter()
         .map(|k| {
             let choice = CoarseChoice::default();
-            let mut ms = Vec::with_capacity(n * passes as usize);
-            let mut started = 0;
-            let mut recall = Vec::with_capacity(passes as usize);
-            for p in 0..passes {
-                let run = k * passes + p;
-                let mut outcomes: Vec<Option<Outcome>> = vec![None; n];
-                for q in permutation(n, ORDER_SALT ^ u64::from(run)) {
-                    let q = q as usize;
-                    let at = sweep::seed(run, q);
-                    let o =
-                        sweep::learned_search(map, plan, setting, Some(&choice), q, at, ranking);
-                    ms.push(stage_sample(&o, plan.cost(&o, q)).total());
-                    started += usize::from(o.coarse);
-                    outcomes[q] = Some(o);
-                }
-                let outcomes: Vec<Outcome> = outcomes.into_iter().flatten().collect();
-                recall.push(metrics::recall_at(&answers(&outcomes, truth), 1));
+            if start == Start::Restarted {
+                let before = CoarseChoice::default();
+                serve(r, &before, (orders + k) * passes, passes);
+                choice
+                    .resume(before.learned())
+                    .expect("a plan's own figures are a plan's");
             }
+            let (ms, started, recall) = serve(r, &choice, k * passes, passes);
             OrderReplay {
                 started_coarse: started as f64 / ms.len().max(1) as f64,
                 settled_coarse: choice.preferred(),
@@ -119,6 +139,35 @@ pub fn replay(
         .collect()
 }
 
+/// `passes` passes of the queries with `choice`, pass p in the order of run
+/// `first_run` + p: every request's time, how many started with the coarse
+/// pass, and each pass's recall@1.
+fn serve(
+    r: Replayed<'_>,
+    choice: &CoarseChoice,
+    first_run: u32,
+    passes: u32,
+) -> (Vec<f64>, usize, Vec<f64>) {
+    let n = r.plan.plain.0.len();
+    let mut ms = Vec::with_capacity(n * passes as usize);
+    let mut started = 0;
+    let mut recall = Vec::with_capacity(passes as usize);
+    for run in first_run..first_run + passes {
+        let mut outcomes: Vec<Option<Outcome>> = vec![None; n];
+        for q in permutation(n, ORDER_SALT ^ u64::from(run)) {
+            let q = q as usize;
+            let at = sweep::seed(run, q);
+            let o = sweep::learned_search(r.map, r.plan, r.setting, Some(choice), q, at, r.ranking);
+            ms.push(stage_sample(&o, r.plan.cost(&o, q)).total());
+            started += usize::from(o.coarse);
+            outcomes[q] = Some(o);
+        }
+        let outcomes: Vec<Outcome> = outcomes.into_iter().flatten().collect();
+        recall.push(metrics::recall_at(&answers(&outcomes, r.truth), 1));
+    }
+    (ms, started, recall)
+}
+
 /// The `results.md` section: one row per setting and vocabulary seed.
 pub fn markdown(rows: &[PlanOrders]) -> String {
     let Some(first) = rows.first() else {
@@ -126,14 +175,16 @@ pub fn markdown(rows: &[PlanOrders]) -> String {
     };
     let mut out = format!(
         "\n## The learned plan over query orders\n\n\
-         Each order is a fresh plan (a server just started) that sees every query \
+         Each order is a plan that sees every query \
          once in each of {} passes, every pass in a random order of its own ({} \
-         orders a seed). `settled coarse`: \
+         orders a seed): on a `fresh` server (just started: the plan runs its \
+         trials) or a `restarted` one (the plan goes on from what a server kept \
+         after as many passes in another random order). `settled coarse`: \
          orders whose plan preferred the coarse pass after the last query; `started \
          coarse` and `× full search` (its median request against the whole-image full \
          search's median): min / median / max over the orders.\n\n\
-         | setting | seed | settled coarse | started coarse | × full search | recall@1 |\n\
-         | --- | --- | --- | --- | --- | --- |\n",
+         | setting | seed | server | settled coarse | started coarse | × full search | recall@1 |\n\
+         | --- | --- | --- | --- | --- | --- | --- |\n",
         first.passes,
         first.orders.len()
     );
@@ -144,9 +195,10 @@ pub fn markdown(rows: &[PlanOrders]) -> String {
     };
     for r in rows {
         out.push_str(&format!(
-            "| {} | {} | {} of {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} of {} | {} | {} | {} |\n",
             r.label,
             r.seed,
+            r.start.name(),
             r.settled_coarse(),
             r.orders.len(),
             show(r.spread(|o| o.started_coarse), &pct),
@@ -163,7 +215,7 @@ mod tests {
     use crate::search::RuleSpec;
 
     #[test]
-    fn every_order_is_a_fresh_plan_that_learns_from_its_trials() {
+    fn a_fresh_plan_learns_from_its_trials_and_a_restarted_one_skips_them() {
         let map = sweep::tests::toy_map();
         let n = 100;
         let (plain, coarse, costs) = sweep::tests::toy_learned(n);
@@ -176,7 +228,14 @@ mod tests {
             .map(|q| HashSet::from([if q % 2 == 0 { 0 } else { 3 }]))
             .collect();
         let setting = Setting::new(RuleSpec::new("fixed", Some(0.2)).unwrap(), 0);
-        let r = replay(&map, plan, &setting, 3, 2, &truth, Ranking::top(1));
+        let replayed = Replayed {
+            map: &map,
+            plan,
+            setting: &setting,
+            truth: &truth,
+            ranking: Ranking::top(1),
+        };
+        let r = replay(replayed, Start::Fresh, 3, 2);
         assert_eq!(r.len(), 3);
         // the coarse pass costs more on these queries: each fresh plan
         // starts with it in its trials and on one request in EXPLORE_EVERY
@@ -191,6 +250,19 @@ mod tests {
             // one plain tile at 10 ms, its quantization and voting
             assert!(o.median_ms >= 10.0 && o.median_ms < 12.0, "{o:?}");
         }
+        // restarted after 2n requests: no trials, only the explorations of
+        // requests 2n + 1 to 4n
+        let explored = (2 * n as u64 + 1..=4 * n as u64)
+            .filter(|k| k.is_multiple_of(CoarseChoice::EXPLORE_EVERY))
+            .count();
+        let restarted = replay(replayed, Start::Restarted, 3, 2);
+        assert_eq!(restarted.len(), 3);
+        for o in &restarted {
+            assert_eq!(o.settled_coarse, Some(false), "{o:?}");
+            let started = explored as f64 / (2 * n) as f64;
+            assert!((o.started_coarse - started).abs() < 1e-12, "{o:?}");
+            assert!((o.recall_at_1 - 0.5).abs() < 1e-12, "{o:?}");
+        }
     }
 
     #[test]
@@ -203,6 +275,7 @@ mod tests {
         };
         let rows = [PlanOrders {
             label: "place-z 2.25 w=20".into(),
+            start: Start::Restarted,
             seed: 2,
             full_median_ms: 20.0,
             passes: 3,
@@ -214,7 +287,7 @@ mod tests {
             "{md}"
         );
         assert!(
-            md.contains("| place-z 2.25 w=20 | 2 | 2 of 3 | 10.0 % / 80.0 % / 80.0 % | 0.300 / 0.350 / 0.500 | 90.0 % / 90.0 % / 90.0 % |"),
+            md.contains("| place-z 2.25 w=20 | 2 | restarted | 2 of 3 | 10.0 % / 80.0 % / 80.0 % | 0.300 / 0.350 / 0.500 | 90.0 % / 90.0 % / 90.0 % |"),
             "{md}"
         );
         assert!(markdown(&[]).is_empty());

@@ -22,13 +22,19 @@
 //! plan's times are bimodal (most requests end after the coarse pass, the
 //! rest pay for it on top of the tiles), and a mean would weigh the few slow
 //! requests as much as the many fast ones.
+//! What a choice has learned ([`Learned`]) can be taken out and put back
+//! ([`CoarseChoice::learned`], [`CoarseChoice::resume`]), so a server
+//! restarted on the same map skips the trials (the service keeps it in a
+//! file: `server::plan_memory`).
 //! No OpenCV here: the policy is plain arithmetic over reported times, and
 //! `bowloc eval --tiles …,auto` replays it over cached queries
-//! (`eval::sweep::run_learned`; `--plan-orders` over random query orders).
+//! (`eval::sweep::run_learned`; `--plan-orders` over random query orders,
+//! fresh and resumed).
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
 use std::sync::Mutex;
 
 /// The running choice between a grid without and with the coarse pass.
@@ -58,8 +64,37 @@ impl Default for State {
     }
 }
 
+/// What a choice has learned: its requests and what each plan has cost.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Learned {
+    /// Requests the choice has been asked about.
+    pub requests: u64,
+    /// Without (`tiles`) and with (`coarse`) the coarse pass.
+    pub tiles: Arm,
+    pub coarse: Arm,
+}
+
+impl Learned {
+    /// Why these figures cannot be what a choice learned (`None`: they can):
+    /// every mean finite, a mean square at least the square of its mean,
+    /// a share within [0, 1].
+    pub fn invalid(&self) -> Option<String> {
+        [("tiles", &self.tiles), ("coarse", &self.coarse)]
+            .into_iter()
+            .find_map(|(name, a)| {
+                let finite = [a.mean_ln_ms, a.mean_sq_ln_ms, a.ended_first]
+                    .iter()
+                    .all(|v| v.is_finite());
+                let square = a.mean_sq_ln_ms >= a.mean_ln_ms * a.mean_ln_ms * (1.0 - 1e-9) - 1e-9;
+                let share = (0.0..=1.0).contains(&a.ended_first);
+                (!(finite && square && share))
+                    .then(|| format!("the {name} plan's figures are not a plan's: {a:?}"))
+            })
+    }
+}
+
 /// What one plan has cost.
-#[derive(Debug, Default, Clone, Copy, PartialEq)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Arm {
     /// Requests answered with it.
     pub samples: u64,
@@ -177,6 +212,31 @@ impl CoarseChoice {
     pub fn arms(&self) -> (Arm, Arm) {
         let s = self.state.lock().unwrap_or_else(|e| e.into_inner());
         (s.arms[0], s.arms[1])
+    }
+
+    /// What the choice has learned so far.
+    pub fn learned(&self) -> Learned {
+        let s = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        Learned {
+            requests: s.requests,
+            tiles: s.arms[0],
+            coarse: s.arms[1],
+        }
+    }
+
+    /// Go on from what an earlier choice learned (a plan that ran its trials
+    /// goes on without them), unless its figures are not a plan's. The draws
+    /// start again from the fixed seed, as in a new choice.
+    pub fn resume(&self, learned: Learned) -> Result<(), String> {
+        if let Some(why) = learned.invalid() {
+            return Err(why);
+        }
+        *self.state.lock().unwrap_or_else(|e| e.into_inner()) = State {
+            requests: learned.requests,
+            arms: [learned.tiles, learned.coarse],
+            ..State::default()
+        };
+        Ok(())
     }
 
     /// The plan preferred now (`None` while the trials run).
@@ -346,6 +406,62 @@ mod tests {
         }
         assert_eq!(c.preferred(), Some(true), "{:?}", c.arms());
         assert!(used_after_trials > 200 / 2, "{used_after_trials}");
+    }
+
+    #[test]
+    fn a_resumed_choice_goes_on_where_the_other_stopped() {
+        let c = CoarseChoice::default();
+        run(&c, 100, 60.0, 20.0);
+        let learned = c.learned();
+        assert_eq!(learned.requests, 100);
+        assert_eq!(learned.tiles.samples + learned.coarse.samples, 100);
+        let text = serde_json::to_string(&learned).unwrap();
+        let back: Learned = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, learned);
+        let resumed = CoarseChoice::default();
+        resumed.resume(back).unwrap();
+        assert_eq!(resumed.learned(), learned);
+        assert_eq!(resumed.preferred(), Some(true));
+        // no trials: the first requests already take the coarse pass
+        let used = run(&resumed, 16, 60.0, 20.0);
+        assert!(used >= 15, "{used}");
+        // a new choice alternates
+        assert_eq!(run(&CoarseChoice::default(), 16, 60.0, 20.0), 8);
+    }
+
+    #[test]
+    fn figures_that_no_choice_learns_are_refused() {
+        let c = CoarseChoice::default();
+        run(&c, 40, 60.0, 20.0);
+        let good = c.learned();
+        let bad = [
+            Learned {
+                coarse: Arm {
+                    mean_ln_ms: f64::NAN,
+                    ..good.coarse
+                },
+                ..good
+            },
+            Learned {
+                tiles: Arm {
+                    ended_first: 1.5,
+                    ..good.tiles
+                },
+                ..good
+            },
+            Learned {
+                tiles: Arm {
+                    mean_sq_ln_ms: 0.0,
+                    ..good.tiles
+                },
+                ..good
+            },
+        ];
+        for learned in bad {
+            let fresh = CoarseChoice::default();
+            assert!(fresh.resume(learned).is_err(), "{learned:?}");
+            assert_eq!(fresh.learned(), Learned::default());
+        }
     }
 
     #[test]

@@ -13,7 +13,7 @@ mod thumbnail;
 mod tiles;
 
 pub use buffers::{Buffers, KEEP_BUFFERS_VAR, keep_image_buffers};
-pub use coarse_choice::CoarseChoice;
+pub use coarse_choice::{CoarseChoice, Learned};
 pub use config::{ExtractConfig, SiftParams};
 pub use decode::{DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file, probe};
 pub use extract::{Descriptors, Features, Frame, Region, Timed, extract, extract_file};

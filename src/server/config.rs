@@ -240,6 +240,11 @@ pub struct SearchDefaults {
     /// a `,coarse` suffix extracts the whole image at half size first; an
     /// `,auto` suffix learns for the map whether to ([`crate::features::CoarseChoice`]).
     pub tiles: String,
+    /// With `,auto`, keep what the service learned of each plan in a file
+    /// beside the map (`<map>.plan.json`), so a restart on the same map,
+    /// machine and settings goes on from it instead of trying both plans
+    /// again ([`super::plan_memory`]).
+    pub remember_plan: bool,
     /// The order tiles are extracted in: `richest` (most FAST corners first),
     /// `spread` (the richest, then the farthest from those taken)
     /// or `random`.
@@ -348,6 +353,7 @@ impl Default for SearchDefaults {
                 learn_coarse: true,
             }
             .to_string(),
+            remember_plan: true,
             tile_order: o.tile_order,
             hamming: o.hamming.is_some(),
             place_window: o.place_window,

@@ -370,6 +370,13 @@ pub fn coarse_choice(choice: &crate::features::CoarseChoice, plan: &crate::pipel
         let drawn = CoarseChoice::PLANS[usize::from(plan.grid.coarse)];
         counter!(PLAN_REQUESTS, "plan" => drawn).increment(1);
     }
+    plan_costs(choice);
+}
+
+/// What the learned coarse pass has measured of each plan: its typical
+/// request (set once a plan has been measured).
+pub fn plan_costs(choice: &crate::features::CoarseChoice) {
+    use crate::features::CoarseChoice;
     let (tiles, coarse) = choice.arms();
     for (plan, arm) in CoarseChoice::PLANS.into_iter().zip([tiles, coarse]) {
         if arm.samples > 0 {

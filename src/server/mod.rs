@@ -20,6 +20,7 @@
 //! - [`page`]: the page for people at `GET /`, its script and style;
 //! - [`thumbnails`]: `GET /images/{id}/thumbnail`, map images for the page;
 //! - [`workers`]: the bounded pool for CPU work;
+//! - [`plan_memory`]: the learned extraction plan kept across restarts;
 //! - [`errors`]: error answers as JSON;
 //! - [`middleware`]: request ids, request logs and metrics, panics;
 //! - [`native_stderr`]: with a JSON log, what the native libraries write to
@@ -39,6 +40,7 @@ pub mod middleware;
 pub mod native_stderr;
 pub mod openapi;
 pub mod page;
+pub mod plan_memory;
 pub mod proto;
 pub mod sequences;
 pub mod status;
@@ -85,6 +87,8 @@ pub struct AppState {
     writing: images::Writing,
     /// A compaction is running or about to.
     compacting: Arc<AtomicBool>,
+    /// Where the learned extraction plan is kept (`None`: it is not).
+    plan_memory: Option<Arc<plan_memory::PlanMemory>>,
 }
 
 impl AppState {
@@ -123,7 +127,6 @@ impl AppState {
         let sequences =
             sequences::Sequences::new(config.sequence.max_sequences, config.sequence.idle());
         Ok(Arc::new(Self {
-            config,
             defaults,
             pool,
             metrics,
@@ -135,6 +138,8 @@ impl AppState {
             shutting_down: AtomicBool::new(false),
             writing: images::Writing::default(),
             compacting: Arc::new(AtomicBool::new(false)),
+            plan_memory: plan_memory::PlanMemory::of(&config).map(Arc::new),
+            config,
         }))
     }
 
@@ -161,6 +166,10 @@ impl AppState {
             tracing::error!("sequence.topology: {e}; requests with a sequence will be refused");
         }
         let _ = self.topology.set(topology);
+        if let (Some(memory), Some(choice)) = (&self.plan_memory, &localizer.coarse_choice) {
+            memory.restore_logged(&localizer);
+            metrics::plan_costs(choice);
+        }
         if self.localizer.set(Arc::new(localizer)).is_ok() {
             metrics::ready(true);
         }
@@ -239,6 +248,17 @@ impl AppState {
             metrics::map_loaded(&*localizer.map.snapshot());
             flag.store(false, Ordering::SeqCst);
         });
+    }
+
+    /// Keep the learned extraction plan in its file, when it changed
+    /// (on a blocking thread: the write is synced).
+    pub async fn keep_plan(&self) {
+        let (Some(memory), Some(localizer)) = (self.plan_memory.clone(), self.localizer.get())
+        else {
+            return;
+        };
+        let localizer = localizer.clone();
+        let _ = tokio::task::spawn_blocking(move || memory.save(&localizer)).await;
     }
 
     pub fn begin_shutdown(&self) {
@@ -349,6 +369,7 @@ pub async fn serve(
                 tick.tick().await;
                 handle.run_upkeep();
                 upkeep_state.sequences.sweep();
+                upkeep_state.keep_plan().await;
             }
         })
     };
@@ -418,6 +439,7 @@ pub async fn serve(
             grace.as_millis()
         );
     }
+    state.keep_plan().await;
     tracing::info!("stopped");
     outcome
 }

@@ -535,6 +535,20 @@ wait "$PID"
 rc=$?
 check "SIGTERM stops the server with exit status 0" test "$rc" = 0
 check "shutdown is logged" grep -q 'stopped' "$TMP/server.log"
+# the learned plan (search.tiles ending in ,auto) is kept beside the map and
+# a restart goes on from it: its typical costs are exported before any query
+PLAN="$TMP/map.bowmap.plan.json"
+check "the learned plan is kept beside the map at shutdown" \
+  jq -e '.version == 1 and .learned.requests > 0 and .learned.tiles.samples > 0 and .learned.coarse.samples > 0 and (.context.map | length) == 16' "$PLAN"
+if start_server "$TMP/config.toml" "$TMP/resumed.log"; then
+  check "a restart resumes the learned plan" grep -q 'learned plan resumed' "$TMP/resumed.log"
+  curl -s "$BASE/metrics" >"$TMP/metrics.txt"
+  check "its typical costs are exported before any query" \
+    awk '$1 ~ /^bowloc_extraction_plan_typical_seconds\{plan="(tiles|coarse)"\}$/ && $2 > 0 { n++ } END { exit n != 2 }' "$TMP/metrics.txt"
+  kill -TERM "$PID"; wait "$PID" 2>/dev/null
+else
+  fail "the server restarts on its kept plan"
+fi
 
 # --- a second server: max_features and overload -------------------------------
 # It also keeps at most 50 features per query (limits.max_features); the
