@@ -8,7 +8,11 @@
 #   start_server CONFIG LOG [FLAG…]
 #                            start the server (with these flags of `serve`),
 #                            wait for /readyz; sets SERVER_PID and
-#                            SERVER_ADDR (127.0.0.1:PORT)
+#                            SERVER_ADDR (127.0.0.1:PORT). It starts as a
+#                            server started for the first time (its learned
+#                            plan runs its trials) unless
+#                            BOWLOC_SEARCH__REMEMBER_PLAN=true is set: then
+#                            it goes on from the plan an earlier one kept
 #   stop_server              SIGTERM, then wait for it to exit
 #   server_rss_kib           the server's resident memory in KiB
 #   gardens_map K [SEED]     the gardens-point map (K words, vocabulary
@@ -54,7 +58,8 @@ load_map() {
 }
 
 start_server() {
-  "$BOWLOC_BIN" serve --config "$1" "${@:3}" >"$2" 2>&1 &
+  BOWLOC_SEARCH__REMEMBER_PLAN=${BOWLOC_SEARCH__REMEMBER_PLAN:-false} \
+    "$BOWLOC_BIN" serve --config "$1" "${@:3}" >"$2" 2>&1 &
   SERVER_PID=$!
   SERVER_ADDR=""
   local _

@@ -67,9 +67,10 @@ pub struct EvalArgs {
     #[arg(long, default_value = "2x2+24")]
     tiles: TilePlan,
     /// With `--tiles …,auto`: also replay, for every setting given with
-    /// --set that stops early, this many fresh plans (each a server just
-    /// started), each over the queries once per run, every time in a random
-    /// order of its own, and
+    /// --set that stops early, this many plans on fresh servers (just
+    /// started) and as many on restarted ones (going on from the plan
+    /// another server kept), each over the queries once per run, every time
+    /// in a random order of its own, and
     /// report per vocabulary seed how many settled on the coarse pass, the
     /// share of searches they started with it, their median request against
     /// the whole-image full search's and their recall@1.

@@ -10,8 +10,8 @@
 //! 2. [`timing`]: each query quantized once per vocabulary (timed);
 //! 3. [`sweep`]: calibrate the grids (on the first vocabulary), then vote
 //!    every setting × vocabulary × run × query; with a learned coarse pass,
-//!    [`plan_orders`] (when asked) replays fresh plans over random query
-//!    orders;
+//!    [`plan_orders`] (when asked) replays fresh and restarted plans over
+//!    random query orders;
 //! 4. [`summary`] (with the definitions in [`metrics`]): every figure as a
 //!    mean over vocabulary seeds with its spread over seeds and, apart, over
 //!    runs; [`recommend`] and [`equal_recall`] decide on the worst seed;
