@@ -716,6 +716,17 @@ async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_cha
     assert_eq!(learned(&damaged).requests, 0);
     let (status, _, _) = send(&damaged, localize("seed=1", "application/json")).await;
     assert_eq!(status, StatusCode::OK);
+    // a file that cannot be written: no panic, nothing kept, and the
+    // service answers
+    let blocked = PlanMemory::at(PathBuf::from("/dev/null/m.bowmap.plan.json"), &config());
+    let localizer = bowloc::server::bootstrap::load(&config(), &Default::default()).unwrap();
+    let choice = localizer.coarse_choice.as_ref().unwrap();
+    choice.record(choice.choose(), 10.0, true);
+    let beside = PlanMemory::at(dir.path().join("other.plan.json"), &config());
+    assert!(beside.save(&localizer), "a plan with a request is kept");
+    assert!(!beside.save(&localizer), "and not written again unchanged");
+    assert!(!blocked.save(&localizer));
+    assert!(!blocked.save(&localizer));
     // a plan not to be kept has no memory
     let mut forget = config();
     forget.search.remember_plan = false;
