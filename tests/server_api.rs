@@ -682,9 +682,42 @@ async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_cha
     let saved: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(saved["learned"]["requests"], trials + 4, "{text}");
 
+    // /map says what was learned, where it is kept, and that it was not
+    // resumed
+    let plan_status = |state: &Arc<AppState>| {
+        let state = state.clone();
+        async move {
+            let map = Request::get("/map").body(Body::empty()).unwrap();
+            let (status, _, body) = send(&state, map).await;
+            assert_eq!(status, StatusCode::OK);
+            let info: serde_json::Value = serde_json::from_slice(&body).unwrap();
+            info["extraction_plan"].clone()
+        }
+    };
+    let plan = plan_status(&first).await;
+    assert_eq!(plan["requests"], trials + 4, "{plan}");
+    assert_eq!(plan["resumed_from"], serde_json::Value::Null, "{plan}");
+    assert_eq!(plan["file"], path_for(&map).display().to_string(), "{plan}");
+    let plans = plan["plans"].as_array().unwrap();
+    assert_eq!(plans.len(), 2, "{plan}");
+    assert_eq!(
+        (plans[0]["plan"].as_str(), plans[1]["plan"].as_str()),
+        (Some("tiles"), Some("coarse"))
+    );
+    let answered: u64 = plans.iter().map(|p| p["requests"].as_u64().unwrap()).sum();
+    assert_eq!(answered, trials + 4, "{plan}");
+    assert!(
+        plans
+            .iter()
+            .all(|p| p["typical_ms"].as_f64().unwrap() > 0.0),
+        "{plan}"
+    );
+    assert!(plan["preferred"].is_string(), "{plan}");
+
     // the same map, machine and settings: no trials
     let second = serve(config());
     assert_eq!(learned(&second), kept);
+    assert_eq!(plan_status(&second).await["resumed_from"], trials + 4);
     let (status, _, _) = send(&second, localize("seed=99", "application/json")).await;
     assert_eq!(status, StatusCode::OK);
     assert_eq!(learned(&second).requests, trials + 5);
@@ -734,4 +767,6 @@ async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_cha
     let mut fixed = config();
     fixed.search.tiles = "2x2+24".into();
     assert!(PlanMemory::of(&fixed).is_none());
+    // a fixed plan has nothing to say
+    assert_eq!(plan_status(&serve(fixed)).await, serde_json::Value::Null);
 }

@@ -250,6 +250,11 @@ impl AppState {
         });
     }
 
+    /// Where the learned extraction plan is kept, when it is.
+    pub fn plan_memory(&self) -> Option<&plan_memory::PlanMemory> {
+        self.plan_memory.as_deref()
+    }
+
     /// Keep the learned extraction plan in its file, when it changed
     /// (on a blocking thread: the write is synced).
     pub async fn keep_plan(&self) {

@@ -101,6 +101,8 @@ pub struct PlanMemory {
     settings: serde_json::Value,
     /// What the file holds now, as far as this process knows.
     saved: Mutex<Option<Learned>>,
+    /// The requests of the plan resumed at start (`None`: none was).
+    resumed: Mutex<Option<u64>>,
     /// A failed write was logged as a warning.
     warned: AtomicBool,
 }
@@ -135,12 +137,18 @@ impl PlanMemory {
             ),
             settings,
             saved: Mutex::new(None),
+            resumed: Mutex::new(None),
             warned: AtomicBool::new(false),
         }
     }
 
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// The requests of the plan resumed at start, when one was.
+    pub fn resumed(&self) -> Option<u64> {
+        *self.resumed.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// The context of `localizer`'s map on this machine with these settings.
@@ -184,6 +192,7 @@ impl PlanMemory {
             return Restored::Ignored(why);
         }
         *self.saved.lock().unwrap_or_else(|e| e.into_inner()) = Some(saved.learned);
+        *self.resumed.lock().unwrap_or_else(|e| e.into_inner()) = Some(saved.learned.requests);
         Restored::Resumed(saved.learned)
     }
 

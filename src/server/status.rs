@@ -4,6 +4,7 @@
 
 use super::AppState;
 use super::errors::{ApiError, ErrorBody};
+use super::plan_memory::PlanMemory;
 use crate::features::ExtractConfig;
 use crate::index::MapMeta;
 use crate::index::MapRead;
@@ -67,6 +68,71 @@ pub struct MapInfo {
     /// The changes since the map file was written: generation, images of
     /// the file and now, added and removed, change log size, last compaction.
     pub changes: crate::live::ChangesInfo,
+    /// The extraction plan learned for the map (`search.tiles` ending in
+    /// `,auto`); absent when the plan is fixed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub extraction_plan: Option<PlanInfo>,
+}
+
+/// What the service has learned of its extraction plans.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PlanInfo {
+    /// The plan preferred now, `tiles` or `coarse` (a request still draws
+    /// its plan); null while the trials run.
+    pub preferred: Option<&'static str>,
+    /// Requests that drew a plan, since the plan was first learned
+    /// (counting those before a restart it was resumed from).
+    pub requests: u64,
+    /// What each plan has cost: `tiles`, then `coarse`.
+    pub plans: Vec<PlanCost>,
+    /// The file it is kept in (`search.remember_plan`); absent when it is
+    /// not kept.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub file: Option<String>,
+    /// The requests of the kept plan this start resumed (null: it ran its
+    /// trials).
+    pub resumed_from: Option<u64>,
+}
+
+/// What one extraction plan has cost.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PlanCost {
+    /// `tiles` or `coarse`.
+    pub plan: &'static str,
+    /// Requests answered with it.
+    pub requests: u64,
+    /// Its typical request (geometric mean of extraction, quantization,
+    /// voting and verification), ms; null before its first request.
+    pub typical_ms: Option<f64>,
+    /// Share of its requests that ended on their first unit (moving
+    /// average).
+    pub ended_first: f64,
+}
+
+impl PlanInfo {
+    fn of(choice: &crate::features::CoarseChoice, memory: Option<&PlanMemory>) -> Self {
+        use crate::features::CoarseChoice;
+        let learned = choice.learned();
+        let plans = CoarseChoice::PLANS
+            .into_iter()
+            .zip([learned.tiles, learned.coarse])
+            .map(|(plan, arm)| PlanCost {
+                plan,
+                requests: arm.samples,
+                typical_ms: (arm.samples > 0).then(|| arm.typical_ms()),
+                ended_first: arm.ended_first,
+            })
+            .collect();
+        Self {
+            preferred: choice
+                .preferred()
+                .map(|coarse| CoarseChoice::PLANS[usize::from(coarse)]),
+            requests: learned.requests,
+            plans,
+            file: memory.map(|m| m.path().display().to_string()),
+            resumed_from: memory.and_then(PlanMemory::resumed),
+        }
+    }
 }
 
 /// The loaded map and vocabulary.
@@ -87,6 +153,10 @@ pub async fn map(State(state): State<Arc<AppState>>) -> Result<Json<MapInfo>, Ap
         vocabulary_path: files.vocabulary.display().to_string(),
         vocabulary: l.vocab.meta().clone(),
         query_extract: l.extract.clone(),
+        extraction_plan: l
+            .coarse_choice
+            .as_ref()
+            .map(|choice| PlanInfo::of(choice, state.plan_memory())),
     }))
 }
 

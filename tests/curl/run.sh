@@ -542,6 +542,9 @@ check "the learned plan is kept beside the map at shutdown" \
   jq -e '.version == 1 and .learned.requests > 0 and .learned.tiles.samples > 0 and .learned.coarse.samples > 0 and (.context.map | length) == 16' "$PLAN"
 if start_server "$TMP/config.toml" "$TMP/resumed.log"; then
   check "a restart resumes the learned plan" grep -q 'learned plan resumed' "$TMP/resumed.log"
+  check "GET /map says the plan was resumed, from the requests the file holds" test \
+    "$(req "$B" "$BASE/map")/$(jq -r '.extraction_plan | .resumed_from == .requests and .requests > 0 and .file != null' "$B")/$(jq -r .learned.requests "$PLAN")" \
+    = "200/true/$(jq -r .extraction_plan.resumed_from "$B")"
   curl -s "$BASE/metrics" >"$TMP/metrics.txt"
   check "its typical costs are exported before any query" \
     awk '$1 ~ /^bowloc_extraction_plan_typical_seconds\{plan="(tiles|coarse)"\}$/ && $2 > 0 { n++ } END { exit n != 2 }' "$TMP/metrics.txt"
