@@ -770,3 +770,46 @@ async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_cha
     // a fixed plan has nothing to say
     assert_eq!(plan_status(&serve(fixed)).await, serde_json::Value::Null);
 }
+
+#[tokio::test]
+async fn a_compaction_while_serving_is_written_into_the_kept_plan() {
+    use bowloc::live::Change;
+    use bowloc::server::plan_memory::{PlanMemory, Restored, path_for};
+    let dir = tempfile::tempdir().unwrap();
+    let (v, m) = files();
+    let map = dir.path().join("m.bowmap");
+    std::fs::copy(m, &map).unwrap();
+    let mut config = Config::default();
+    config.files.vocabulary = v.clone();
+    config.files.map = map.clone();
+    config.bootstrap.enabled = false;
+    config.server.workers = 1;
+    config.search.tiles = "2x2+24,auto".into();
+    // a write token: the map is opened with its change log
+    config.auth.write_token = Some("a-write-token-long-enough-0123456789".into());
+    let localizer = bowloc::server::bootstrap::load(&config, &Default::default()).unwrap();
+    let memory = PlanMemory::of(&config).unwrap();
+    let choice = localizer.coarse_choice.as_ref().unwrap();
+    choice.record(choice.choose(), 10.0, true);
+    assert!(memory.save(&localizer));
+    let read = || -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(path_for(&map)).unwrap()).unwrap()
+    };
+    let before = read()["context"]["map"].clone();
+    // a change and a compaction: a new map file, no new request
+    let name = {
+        use bowloc::index::MapRead;
+        localizer.map.snapshot().image(0).name.to_owned()
+    };
+    localizer.map.apply(Change::Remove { name }).unwrap();
+    assert!(localizer.map.compact().unwrap().is_some());
+    assert!(memory.save(&localizer), "the new map file is recorded");
+    let after = read()["context"]["map"].clone();
+    assert_ne!(before, after);
+    assert_eq!(read()["learned"]["requests"], 1);
+    // and a restart on the compacted map goes on from the plan
+    drop(localizer);
+    let reopened = bowloc::server::bootstrap::load(&config, &Default::default()).unwrap();
+    let memory = PlanMemory::of(&config).unwrap();
+    assert!(matches!(memory.restore(&reopened), Restored::Resumed(l) if l.requests == 1));
+}

@@ -99,8 +99,9 @@ pub struct PlanMemory {
     /// each save: a compaction writes a new map file).
     machine: (String, usize, Option<String>),
     settings: serde_json::Value,
-    /// What the file holds now, as far as this process knows.
-    saved: Mutex<Option<Learned>>,
+    /// What the file holds now, as far as this process knows: the plan
+    /// and the map file it was learned on.
+    saved: Mutex<Option<(Learned, String)>>,
     /// The requests of the plan resumed at start (`None`: none was).
     resumed: Mutex<Option<u64>>,
     /// A failed write was logged as a warning.
@@ -191,26 +192,29 @@ impl PlanMemory {
         if let Err(why) = choice.resume(saved.learned) {
             return Restored::Ignored(why);
         }
-        *self.saved.lock().unwrap_or_else(|e| e.into_inner()) = Some(saved.learned);
+        *self.saved.lock().unwrap_or_else(|e| e.into_inner()) =
+            Some((saved.learned, saved.context.map.clone()));
         *self.resumed.lock().unwrap_or_else(|e| e.into_inner()) = Some(saved.learned.requests);
         Restored::Resumed(saved.learned)
     }
 
-    /// Write `localizer`'s learned plan to the file when it changed since
-    /// the last write (atomically: a reader sees the old file or the new).
-    /// Returns whether it wrote.
+    /// Write `localizer`'s learned plan to the file when it, or the map
+    /// file (a compaction), changed since the last write (atomically: a
+    /// reader sees the old file or the new). Returns whether it wrote.
     pub fn save(&self, localizer: &Localizer) -> bool {
         let Some(choice) = &localizer.coarse_choice else {
             return false;
         };
         let learned = choice.learned();
+        let context = self.context(localizer);
         let mut saved = self.saved.lock().unwrap_or_else(|e| e.into_inner());
-        if *saved == Some(learned) || learned.requests == 0 {
+        let now = (learned, context.map.clone());
+        if saved.as_ref() == Some(&now) || learned.requests == 0 {
             return false;
         }
         let file = Saved {
             version: VERSION,
-            context: self.context(localizer),
+            context,
             learned,
         };
         let written = crate::store::write_atomic(&self.path, |w| {
@@ -219,7 +223,7 @@ impl PlanMemory {
         });
         match written {
             Ok(()) => {
-                *saved = Some(learned);
+                *saved = Some(now);
                 true
             }
             Err(e) => {
