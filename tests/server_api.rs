@@ -640,23 +640,28 @@ async fn a_frame_of_a_sequence_warms_up_as_the_map_images_say() {
     assert_eq!(warm_up(config, "fixed").await, 7);
 }
 
-#[tokio::test]
-async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_changed() {
-    use bowloc::server::plan_memory::{PlanMemory, Restored, path_for};
-    // a copy of the map, so that its plan file is this test's own
+/// The service's configuration with a learned plan, on a copy of the map
+/// in a folder of its own (so its plan file is the caller's alone).
+fn learned_plan_config() -> (tempfile::TempDir, Config) {
     let dir = tempfile::tempdir().unwrap();
     let (v, m) = files();
     let map = dir.path().join("m.bowmap");
     std::fs::copy(m, &map).unwrap();
-    let config = || {
-        let mut config = Config::default();
-        config.files.vocabulary = v.clone();
-        config.files.map = map.clone();
-        config.bootstrap.enabled = false;
-        config.server.workers = 1;
-        config.search.tiles = "2x2+24,auto".into();
-        config
-    };
+    let mut config = Config::default();
+    config.files.vocabulary = v.clone();
+    config.files.map = map;
+    config.bootstrap.enabled = false;
+    config.server.workers = 1;
+    config.search.tiles = "2x2+24,auto".into();
+    (dir, config)
+}
+
+#[tokio::test]
+async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_changed() {
+    use bowloc::server::plan_memory::{PlanMemory, Restored, path_for};
+    let (dir, base) = learned_plan_config();
+    let map = base.files.map.clone();
+    let config = || base.clone();
     let serve = |config: Config| {
         let localizer = bowloc::server::bootstrap::load(&config, &Default::default()).unwrap();
         let state = AppState::new(config).unwrap();
@@ -775,16 +780,8 @@ async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_cha
 async fn a_compaction_while_serving_is_written_into_the_kept_plan() {
     use bowloc::live::Change;
     use bowloc::server::plan_memory::{PlanMemory, Restored, path_for};
-    let dir = tempfile::tempdir().unwrap();
-    let (v, m) = files();
-    let map = dir.path().join("m.bowmap");
-    std::fs::copy(m, &map).unwrap();
-    let mut config = Config::default();
-    config.files.vocabulary = v.clone();
-    config.files.map = map.clone();
-    config.bootstrap.enabled = false;
-    config.server.workers = 1;
-    config.search.tiles = "2x2+24,auto".into();
+    let (_dir, mut config) = learned_plan_config();
+    let map = config.files.map.clone();
     // a write token: the map is opened with its change log
     config.auth.write_token = Some("a-write-token-long-enough-0123456789".into());
     let localizer = bowloc::server::bootstrap::load(&config, &Default::default()).unwrap();
