@@ -89,18 +89,43 @@ pub fn cpu_from(cpuinfo: &str) -> (String, String) {
     (model, level.to_owned())
 }
 
+/// This machine's CPU as SIFT's speed and output depend on it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cpu {
+    pub model: String,
+    /// As [`cpu_from`] names it.
+    pub instruction_set: String,
+    /// Logical CPUs the process may use.
+    pub cpus: usize,
+    /// `OPENCV_CPU_DISABLE`, when set.
+    pub opencv_cpu_disable: Option<String>,
+}
+
+impl Cpu {
+    /// The CPU this process runs on (`/proc/cpuinfo`, the environment).
+    pub fn here() -> Self {
+        let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+        let (model, instruction_set) = cpu_from(&cpuinfo);
+        Self {
+            model,
+            instruction_set,
+            cpus: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            opencv_cpu_disable: std::env::var("OPENCV_CPU_DISABLE").ok(),
+        }
+    }
+}
+
 impl MachineInfo {
     /// This machine, with OpenCV's own description and the descriptors'
     /// checksums.
     pub fn here(opencv: OpenCvInfo, map_descriptors: u64, query_descriptors: u64) -> Self {
-        let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-        let (cpu_model, instruction_set) = cpu_from(&cpuinfo);
+        let cpu = Cpu::here();
         Self {
-            cpu_model,
-            cpus: std::thread::available_parallelism().map_or(1, |n| n.get()),
-            instruction_set,
+            cpu_model: cpu.model,
+            cpus: cpu.cpus,
+            instruction_set: cpu.instruction_set,
             opencv,
-            opencv_cpu_disable: std::env::var("OPENCV_CPU_DISABLE").ok(),
+            opencv_cpu_disable: cpu.opencv_cpu_disable,
             map_descriptors: format!("{map_descriptors:016x}"),
             query_descriptors: format!("{query_descriptors:016x}"),
         }

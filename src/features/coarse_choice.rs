@@ -45,10 +45,7 @@ pub struct CoarseChoice {
 
 #[derive(Debug, Clone)]
 struct State {
-    /// Requests seen by [`CoarseChoice::choose`].
-    requests: u64,
-    /// Without (0) and with (1) the coarse pass.
-    arms: [Arm; 2],
+    learned: Learned,
     /// The draws, from a fixed seed: a replay of the same requests makes
     /// the same choices.
     rng: ChaCha8Rng,
@@ -57,8 +54,7 @@ struct State {
 impl Default for State {
     fn default() -> Self {
         Self {
-            requests: 0,
-            arms: [Arm::default(); 2],
+            learned: Learned::default(),
             rng: ChaCha8Rng::seed_from_u64(0x636f_6172_7365),
         }
     }
@@ -75,6 +71,23 @@ pub struct Learned {
 }
 
 impl Learned {
+    /// Each plan's name (in `/metrics` and `/map`) with what it has cost:
+    /// the tiles alone, then the coarse pass first.
+    pub fn plans(&self) -> [(&'static str, Arm); 2] {
+        [
+            (CoarseChoice::plan_name(false), self.tiles),
+            (CoarseChoice::plan_name(true), self.coarse),
+        ]
+    }
+
+    fn arm_mut(&mut self, coarse: bool) -> &mut Arm {
+        if coarse {
+            &mut self.coarse
+        } else {
+            &mut self.tiles
+        }
+    }
+
     /// Why these figures cannot be what a choice learned (`None`: they can):
     /// every mean finite, a mean square at least the square of its mean,
     /// a share within [0, 1].
@@ -161,23 +174,33 @@ impl CoarseChoice {
     /// The coarse pass is preferred only when more than this share of its
     /// requests ended on it.
     pub const MIN_ENDED_ON_COARSE: f64 = 0.5;
-    /// The plans' names (in `/metrics`), without and with the coarse pass.
+    /// The plans' names (in `/metrics` and `/map`), without and with the
+    /// coarse pass.
     pub const PLANS: [&'static str; 2] = ["tiles", "coarse"];
+
+    /// The name of the plan with (`coarse`) or without the coarse pass.
+    pub fn plan_name(coarse: bool) -> &'static str {
+        Self::PLANS[usize::from(coarse)]
+    }
 
     /// Whether the next request should start with the coarse pass.
     pub fn choose(&self) -> bool {
         let mut s = self.state.lock().unwrap_or_else(|e| e.into_inner());
-        s.requests += 1;
-        let [plain, coarse] = s.arms;
+        s.learned.requests += 1;
+        let Learned {
+            requests,
+            tiles: plain,
+            coarse,
+        } = s.learned;
         if plain.samples < Self::TRIAL || coarse.samples < Self::TRIAL {
             // trials: the plan tried less, alternating on a tie
             return match plain.samples.cmp(&coarse.samples) {
                 std::cmp::Ordering::Less => false,
                 std::cmp::Ordering::Greater => true,
-                std::cmp::Ordering::Equal => s.requests.is_multiple_of(2),
+                std::cmp::Ordering::Equal => requests.is_multiple_of(2),
             };
         }
-        if s.requests.is_multiple_of(Self::EXPLORE_EVERY) {
+        if requests.is_multiple_of(Self::EXPLORE_EVERY) {
             return !Self::coarse_wins(plain, coarse);
         }
         coarse.ended_first > Self::MIN_ENDED_ON_COARSE
@@ -199,7 +222,7 @@ impl CoarseChoice {
             return;
         }
         let mut s = self.state.lock().unwrap_or_else(|e| e.into_inner());
-        let arm = &mut s.arms[coarse as usize];
+        let arm = s.learned.arm_mut(coarse);
         arm.samples += 1;
         let weight = (1.0 / arm.samples as f64).max(1.0 / Self::MEMORY);
         let ln_ms = ms.max(1e-3).ln();
@@ -210,18 +233,13 @@ impl CoarseChoice {
 
     /// What each plan has cost so far: (without, with) the coarse pass.
     pub fn arms(&self) -> (Arm, Arm) {
-        let s = self.state.lock().unwrap_or_else(|e| e.into_inner());
-        (s.arms[0], s.arms[1])
+        let learned = self.learned();
+        (learned.tiles, learned.coarse)
     }
 
     /// What the choice has learned so far.
     pub fn learned(&self) -> Learned {
-        let s = self.state.lock().unwrap_or_else(|e| e.into_inner());
-        Learned {
-            requests: s.requests,
-            tiles: s.arms[0],
-            coarse: s.arms[1],
-        }
+        self.state.lock().unwrap_or_else(|e| e.into_inner()).learned
     }
 
     /// Go on from what an earlier choice learned (a plan that ran its trials
@@ -232,8 +250,7 @@ impl CoarseChoice {
             return Err(why);
         }
         *self.state.lock().unwrap_or_else(|e| e.into_inner()) = State {
-            requests: learned.requests,
-            arms: [learned.tiles, learned.coarse],
+            learned,
             ..State::default()
         };
         Ok(())

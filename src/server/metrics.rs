@@ -365,9 +365,8 @@ pub fn localized(answer: &Localization) {
 /// The plan the learned coarse pass drew for a request, and what it has
 /// measured of each plan.
 pub fn coarse_choice(choice: &crate::features::CoarseChoice, plan: &crate::pipeline::Plan) {
-    use crate::features::CoarseChoice;
     if plan.learned() {
-        let drawn = CoarseChoice::PLANS[usize::from(plan.grid.coarse)];
+        let drawn = crate::features::CoarseChoice::plan_name(plan.grid.coarse);
         counter!(PLAN_REQUESTS, "plan" => drawn).increment(1);
     }
     plan_costs(choice);
@@ -376,9 +375,7 @@ pub fn coarse_choice(choice: &crate::features::CoarseChoice, plan: &crate::pipel
 /// What the learned coarse pass has measured of each plan: its typical
 /// request (set once a plan has been measured).
 pub fn plan_costs(choice: &crate::features::CoarseChoice) {
-    use crate::features::CoarseChoice;
-    let (tiles, coarse) = choice.arms();
-    for (plan, arm) in CoarseChoice::PLANS.into_iter().zip([tiles, coarse]) {
+    for (plan, arm) in choice.learned().plans() {
         if arm.samples > 0 {
             gauge!(PLAN_COST, "plan" => plan).set(arm.typical_ms() / 1e3);
         }

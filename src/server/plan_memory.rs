@@ -22,8 +22,8 @@ use crate::features::Learned;
 use crate::pipeline::Localizer;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Mutex, OnceLock};
 
 /// The file's format; another is ignored.
 pub const VERSION: u32 = 1;
@@ -95,15 +95,14 @@ pub enum Restored {
 #[derive(Debug)]
 pub struct PlanMemory {
     path: PathBuf,
-    /// The machine and settings part of the context (the map's is read at
-    /// each save: a compaction writes a new map file).
-    machine: (String, usize, Option<String>),
-    settings: serde_json::Value,
+    /// The context but for the map and vocabulary, which are read at each
+    /// save (a compaction writes a new map file).
+    here: Context,
     /// What the file holds now, as far as this process knows: the plan
     /// and the map file it was learned on.
     saved: Mutex<Option<(Learned, String)>>,
     /// The requests of the plan resumed at start (`None`: none was).
-    resumed: Mutex<Option<u64>>,
+    resumed: OnceLock<u64>,
     /// A failed write was logged as a warning.
     warned: AtomicBool,
 }
@@ -119,26 +118,26 @@ impl PlanMemory {
 
     /// A memory in `path` for the settings of `config` on this machine.
     pub fn at(path: PathBuf, config: &Config) -> Self {
-        let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-        let (model, level) = crate::eval::machine::cpu_from(&cpuinfo);
-        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let settings = serde_json::json!({
-            "search": config.search,
-            "verify": config.verify,
-            "opencv_threads": config.server.opencv_threads,
-            "tiles_ahead": config.server.tiles_ahead,
-            "max_features": config.limits.max_features,
-        });
+        let cpu = crate::eval::machine::Cpu::here();
+        let here = Context {
+            map: String::new(),
+            vocabulary: String::new(),
+            cpu: format!("{} ({})", cpu.model, cpu.instruction_set),
+            cpus: cpu.cpus,
+            opencv_cpu_disable: cpu.opencv_cpu_disable,
+            settings: serde_json::json!({
+                "search": config.search,
+                "verify": config.verify,
+                "opencv_threads": config.server.opencv_threads,
+                "tiles_ahead": config.server.tiles_ahead,
+                "max_features": config.limits.max_features,
+            }),
+        };
         Self {
             path,
-            machine: (
-                format!("{model} ({level})"),
-                cpus,
-                std::env::var("OPENCV_CPU_DISABLE").ok(),
-            ),
-            settings,
+            here,
             saved: Mutex::new(None),
-            resumed: Mutex::new(None),
+            resumed: OnceLock::new(),
             warned: AtomicBool::new(false),
         }
     }
@@ -149,19 +148,15 @@ impl PlanMemory {
 
     /// The requests of the plan resumed at start, when one was.
     pub fn resumed(&self) -> Option<u64> {
-        *self.resumed.lock().unwrap_or_else(|e| e.into_inner())
+        self.resumed.get().copied()
     }
 
     /// The context of `localizer`'s map on this machine with these settings.
     pub fn context(&self, localizer: &Localizer) -> Context {
-        let (cpu, cpus, disable) = self.machine.clone();
         Context {
             map: format!("{:016x}", localizer.map.snapshot().base().fingerprint()),
             vocabulary: localizer.vocab.hash_hex(),
-            cpu,
-            cpus,
-            opencv_cpu_disable: disable,
-            settings: self.settings.clone(),
+            ..self.here.clone()
         }
     }
 
@@ -194,7 +189,7 @@ impl PlanMemory {
         }
         *self.saved.lock().unwrap_or_else(|e| e.into_inner()) =
             Some((saved.learned, saved.context.map.clone()));
-        *self.resumed.lock().unwrap_or_else(|e| e.into_inner()) = Some(saved.learned.requests);
+        let _ = self.resumed.set(saved.learned.requests);
         Restored::Resumed(saved.learned)
     }
 
@@ -300,6 +295,32 @@ mod tests {
             ..context()
         };
         assert_eq!(c.differs_from(&settings), Some("other settings"));
+    }
+
+    #[test]
+    fn the_configuration_file_names_every_setting_a_plan_is_kept_for() {
+        let memory = PlanMemory::at(PathBuf::from("m.plan.json"), &Config::default());
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/default.toml");
+        let toml = std::fs::read_to_string(path).unwrap();
+        // the comment lines right above the key
+        let (above, _) = toml.split_once("\nremember_plan = ").unwrap();
+        let comment: Vec<&str> = above
+            .lines()
+            .rev()
+            .take_while(|l| l.starts_with('#'))
+            .collect();
+        let comment = comment.join(" ");
+        let sections = ["search", "verify"];
+        for key in memory.here.settings.as_object().unwrap().keys() {
+            let named = match sections.contains(&key.as_str()) {
+                true => comment.contains(&format!("[{key}]")),
+                false => comment.contains(key.as_str()),
+            };
+            assert!(
+                named,
+                "config/default.toml's remember_plan must name {key}: {comment}"
+            );
+        }
     }
 
     #[test]

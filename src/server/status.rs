@@ -113,9 +113,9 @@ impl PlanInfo {
     fn of(choice: &crate::features::CoarseChoice, memory: Option<&PlanMemory>) -> Self {
         use crate::features::CoarseChoice;
         let learned = choice.learned();
-        let plans = CoarseChoice::PLANS
+        let plans = learned
+            .plans()
             .into_iter()
-            .zip([learned.tiles, learned.coarse])
             .map(|(plan, arm)| PlanCost {
                 plan,
                 requests: arm.samples,
@@ -124,9 +124,7 @@ impl PlanInfo {
             })
             .collect();
         Self {
-            preferred: choice
-                .preferred()
-                .map(|coarse| CoarseChoice::PLANS[usize::from(coarse)]),
+            preferred: choice.preferred().map(CoarseChoice::plan_name),
             requests: learned.requests,
             plans,
             file: memory.map(|m| m.path().display().to_string()),
