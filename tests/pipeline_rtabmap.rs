@@ -436,7 +436,10 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
     // budget too tight for three starts with the coarse pass; a loose one,
     // or none, keeps the configured tiles
     let cost = localizer.tile_cost();
-    let (first, three) = (cost.first_tiles(1).unwrap(), cost.first_tiles(3).unwrap());
+    let (first, three) = (
+        cost.first_tiles(1, false).unwrap(),
+        cost.first_tiles(3, false).unwrap(),
+    );
     assert!(
         first > Duration::ZERO && three > first,
         "{first:?} {three:?}"
@@ -463,7 +466,9 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
 /// A spare core extracts the next tile together with the one after it
 /// (`server.tiles_ahead`): the features, the search and its answer are the
 /// same as one tile at a time; a search that stops with a tile extracted
-/// ahead says so, and a time budget keeps one tile at a time.
+/// ahead says so. A time budget every tile fits in goes ahead alike; one
+/// that no tile fits in ends the search after the first, whose pair's
+/// second was extracted ahead for nothing.
 #[test]
 fn tiles_extracted_ahead_change_nothing_in_the_answer() {
     use bowloc::features::{GrayImage, TileGrid, Tiles, TilesAhead, decode_file};
@@ -508,6 +513,14 @@ fn tiles_extracted_ahead_change_nothing_in_the_answer() {
         budget: Some(std::time::Duration::from_secs(600)),
         ..spare.clone()
     };
+    let tight = SearchOptions {
+        budget: Some(std::time::Duration::from_micros(100)),
+        ..spare.clone()
+    };
+    let ahead_unused = TilesAhead {
+        extracted: 1,
+        unused: true,
+    };
     let ids =
         |a: &bowloc::report::Localization| a.candidates.iter().map(|c| c.id).collect::<Vec<_>>();
     let (mut stopped_ahead, mut went_ahead) = (0, 0);
@@ -537,8 +550,18 @@ fn tiles_extracted_ahead_change_nothing_in_the_answer() {
         let c = localizer
             .localize_file(&q.path, &budget, Some(grid))
             .unwrap();
-        assert_eq!(c.tiles.ahead, TilesAhead::default(), "{}", q.name);
+        assert_eq!(c.tiles.ahead, b.tiles.ahead, "{}", q.name);
         assert_eq!(ids(&a), ids(&c), "{}", q.name);
+        let d = localizer
+            .localize_file(&q.path, &tight, Some(grid))
+            .unwrap();
+        assert_eq!(d.tiles.extracted, 1, "{}", q.name);
+        assert_eq!(d.tiles.ahead, ahead_unused, "{}", q.name);
+        let kind = match b.tiles.extracted {
+            1 => b.stop.kind,
+            _ => bowloc::search::StopKind::Budget,
+        };
+        assert_eq!(d.stop.kind, kind, "{}", q.name);
     }
     assert_eq!(went_ahead, real.data.queries.len());
     // some searches stop after the first tile of a pair, with the other

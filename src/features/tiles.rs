@@ -425,6 +425,16 @@ impl Tiles {
         }
     }
 
+    /// The keypoints of the next unit when it is already extracted, ahead
+    /// of its turn ([`Tiles::extract_ahead`]): only its votes are left to
+    /// wait for.
+    pub fn waiting_keypoints(&self) -> Option<usize> {
+        match &self.ahead {
+            Some((at, Ok((features, _)))) if *at == self.next => Some(features.len()),
+            _ => None,
+        }
+    }
+
     /// What the unit handed out last took to extract on its own thread
     /// (zero before any): with two at a time, not the wait for it.
     pub fn last_time(&self) -> Duration {

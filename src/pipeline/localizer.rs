@@ -43,6 +43,8 @@ struct Spent {
     pass: Option<search::budget::UnitCost>,
     /// Each tile after it, in the order extracted.
     tiles: Vec<search::budget::UnitCost>,
+    /// Of the tiles' time, their quantization, votes and checks.
+    voting: Duration,
     /// The tiles are the configured grid's, whose first tiles the
     /// localizer has learnt.
     configured: bool,
@@ -263,7 +265,9 @@ impl Localizer {
             };
         };
         let first = search::budget::TILES_TO_BEAT_THE_PASS as usize;
-        let tight = search::budget::pass_first(budget, self.tile_cost.first_tiles(first));
+        let two_at_a_time = options.spare_core.as_ref().is_some_and(|c| c.now());
+        let first_tiles = self.tile_cost.first_tiles(first, two_at_a_time);
+        let tight = search::budget::pass_first(budget, first_tiles);
         Plan {
             grid: TileGrid {
                 coarse: grid.coarse || (tight && grid.count() > 1),
@@ -282,17 +286,38 @@ impl Localizer {
     /// What the search needs next, in tiles, and how long they are
     /// expected to take ([`search::budget`]): after tiles, the next one,
     /// priced by the keypoints it is expected to hold (the tiles' keypoints
-    /// so far shared out by their expected shares); after the coarse pass
-    /// alone, [`search::budget::TILES_TO_BEAT_THE_PASS`] tiles at what the
-    /// pass took each (pricing them as [`Localizer::first_tiles_time`] does
-    /// answered no better: docs/service.md, "A time budget").
-    fn next_tiles_time(&self, tiles: &Tiles, spent: &Spent) -> (Duration, u32) {
+    /// so far shared out by their expected shares), with `two_at_a_time`
+    /// the next two, extracted together, at the longer of the two; a tile
+    /// extracted ahead by its own keypoints' votes alone. After the coarse
+    /// pass alone, [`search::budget::TILES_TO_BEAT_THE_PASS`] tiles at what
+    /// the pass took for each wait ([`search::budget::waits`]; pricing them
+    /// as [`Localizer::first_tiles_time`] does answered no better:
+    /// docs/service.md, "A time budget").
+    fn next_tiles_time(
+        &self,
+        tiles: &Tiles,
+        spent: &Spent,
+        two_at_a_time: bool,
+    ) -> (Duration, u32) {
         if spent.tiles.is_empty() {
             let n = search::budget::TILES_TO_BEAT_THE_PASS;
-            return (spent.each_as_the_pass(n).unwrap_or_default(), n);
+            let waits = search::budget::waits(n, two_at_a_time);
+            return (spent.each_as_the_pass(waits).unwrap_or_default(), n);
         }
-        let next = &tiles.shares_left()[..1];
-        (self.priced(tiles, &spent.tiles, next), 1)
+        if let Some(keypoints) = tiles.waiting_keypoints() {
+            let voted = spent.tiles.iter().map(|c| c.keypoints).sum();
+            return (
+                search::budget::waiting_tile_time(spent.voting, voted, keypoints),
+                1,
+            );
+        }
+        let together = if two_at_a_time { 2 } else { 1 };
+        let next = &tiles.shares_left()[..together.min(tiles.shares_left().len())];
+        let longest = next
+            .iter()
+            .map(|&share| self.priced(tiles, &spent.tiles, &[share]))
+            .max();
+        (longest.unwrap_or_default(), next.len() as u32)
     }
 
     /// The tiles with expected shares `left` after those of `costs` (at
@@ -302,13 +327,16 @@ impl Localizer {
         search::budget::tiles_left_time(costs, tiles.share_extracted(), left, per_keypoint)
     }
 
-    /// What the first `n` tiles are expected to take before any is timed:
-    /// in the configured grid, what they have taken lately, each place in
+    /// What the first `n` tiles are expected to take before any is timed,
+    /// one at a time (the extraction a stop saves, wherever it would have
+    /// run): in the configured grid, what they have taken lately, each place in
     /// the order at its own mean ([`search::budget::TileCostModel::first_tiles`]);
     /// else (another grid, or nothing learnt yet) each at what the coarse
     /// pass took.
     fn first_tiles_time(&self, n: usize, spent: &Spent) -> Duration {
-        let learnt = spent.configured.then(|| self.tile_cost.first_tiles(n));
+        let learnt = spent
+            .configured
+            .then(|| self.tile_cost.first_tiles(n, false));
         let each_as_the_pass = spent.each_as_the_pass(n as u32);
         learnt.flatten().or(each_as_the_pass).unwrap_or_default()
     }
@@ -406,21 +434,31 @@ impl Localizer {
         let mut spent = Spent {
             pass: None,
             tiles: Vec::new(),
+            voting: Duration::ZERO,
             configured: tiles_only(grid) == tiles_only(self.tiles),
         };
         // what the tiles the search stopped before would have taken
         let mut skipped = None;
         loop {
+            // a core that would idle extracts the tile after this one
+            let mut ahead = options.spare_core.as_ref().is_some_and(|c| c.now());
             // a budget ends a search only where a tile is left to skip, and
             // never before the first (after a coarse pass, with the pass's
-            // votes: the next tile would start the search over)
+            // votes: the next tile would start the search over); the next
+            // two tiles that do not fit together may fit one at a time
             if let Some(budget) = options
                 .budget
                 .filter(|_| !search.stopped() && (1..tiles.total()).contains(&tiles.extracted()))
             {
-                let (next, n) = self.next_tiles_time(&tiles, &spent);
-                if let Err(why) = search::budget::next_tiles_fit(budget, started.elapsed(), next, n)
-                {
+                let fits = |two_at_a_time| {
+                    let (next, n) = self.next_tiles_time(&tiles, &spent, two_at_a_time);
+                    search::budget::next_tiles_fit(budget, started.elapsed(), next, n)
+                };
+                let fit = fits(ahead).or_else(|why| match ahead {
+                    true => fits(false).inspect(|()| ahead = false),
+                    false => Err(why),
+                });
+                if let Err(why) = fit {
                     search.end(search::StopKind::Budget, why);
                 }
             }
@@ -430,9 +468,6 @@ impl Localizer {
             if search.stopped() && full.as_ref().is_none_or(Search::stopped) {
                 break;
             }
-            // a core that would idle extracts the tile after this one
-            let ahead =
-                options.budget.is_none() && options.spare_core.as_ref().is_some_and(|c| c.now());
             tiles.extract_ahead(ahead);
             let t = Instant::now();
             let Some(tile) = tiles.next_tile() else { break };
@@ -480,7 +515,10 @@ impl Localizer {
             };
             match step.coarse {
                 true => spent.pass = Some(cost),
-                false => spent.tiles.push(cost),
+                false => {
+                    spent.tiles.push(cost);
+                    spent.voting += fed.elapsed();
+                }
             }
         }
         // what the tiles of the configured grid cost (not a grid asked for)

@@ -14,6 +14,11 @@
 //! expected keypoints instead, at what a keypoint costs on this machine,
 //! which [`TileCostModel`] learns from the requests served.
 //!
+//! While a core would idle, tiles are extracted two at a time (the second
+//! on that core, [`crate::features::Tiles::extract_ahead`]): a pair waits
+//! for its longer tile, and the second, already extracted when its turn
+//! comes, costs only its votes ([`waiting_tile_time`]).
+//!
 //! A tight budget also changes the plan: one that holds fewer than
 //! [`TILES_TO_BEAT_THE_PASS`] tiles starts with the coarse pass
 //! ([`pass_first`]), and after a pass the search starts over on the tiles
@@ -105,6 +110,28 @@ pub fn slope_sums(tiles: &[UnitCost]) -> (f64, f64) {
         let dk = u.keypoints as f64 - mean_k;
         (xy + dk * (u.time.as_secs_f64() - mean_t), xx + dk * dk)
     })
+}
+
+/// The time a tile extracted ahead of its turn (on a spare core, while the
+/// tile before it was extracted) still takes: its extraction is done, its
+/// `keypoints` are known, and only their quantization, votes and checks are
+/// left, at what those took a keypoint in this request so far (`voting`
+/// over the `voted` keypoints of the tiles before it).
+pub fn waiting_tile_time(voting: Duration, voted: usize, keypoints: usize) -> Duration {
+    match voted {
+        0 => Duration::ZERO,
+        n => voting.mul_f64(keypoints as f64 / n as f64),
+    }
+}
+
+/// How many waits `tiles` tiles in a row take: one each, or with two
+/// extracted at a time (the second on a spare core,
+/// [`crate::features::Tiles::extract_ahead`]) one a pair.
+pub fn waits(tiles: u32, two_at_a_time: bool) -> u32 {
+    match two_at_a_time {
+        true => tiles.div_ceil(2),
+        false => tiles,
+    }
 }
 
 /// The tiles whose answer beats the coarse pass's: the pass sees the whole
@@ -206,21 +233,26 @@ impl TileCostModel {
         Duration::from_secs_f64((s.xy / s.xx).max(0.0))
     }
 
-    /// What the first `n` tiles of a request take together, each at the
-    /// mean of the recent requests' tiles at its place in the order; a place
-    /// no request has reached lately at the mean of the one before (`None`
-    /// before the first request).
-    pub fn first_tiles(&self, n: usize) -> Option<Duration> {
+    /// How long a request waits for its first `n` tiles, each at the mean
+    /// of the recent requests' tiles at its place in the order (a place no
+    /// request has reached lately at the mean of the one before; `None`
+    /// before the first request): their sum, or with two at a time
+    /// ([`waits`]) the longer of each pair's.
+    pub fn first_tiles(&self, n: usize, two_at_a_time: bool) -> Option<Duration> {
         let s = self.sums();
         let mut last = None;
-        let mut sum = 0.0;
+        let mut each = Vec::with_capacity(n);
         for k in 0..n {
             if let Some(&(seconds, count)) = s.at.get(k).filter(|a| a.1 > 0.0) {
                 last = Some(seconds / count);
             }
-            sum += last?;
+            each.push(last?);
         }
-        Some(Duration::from_secs_f64(sum))
+        let together = if two_at_a_time { 2 } else { 1 };
+        let waits = each.chunks(together);
+        Some(Duration::from_secs_f64(
+            waits.map(|w| w.iter().copied().fold(0.0, f64::max)).sum(),
+        ))
     }
 
     /// Learn from the tiles of one request in the grid whose tiles this
@@ -326,16 +358,19 @@ mod tests {
         let cost = TileCostModel::new();
         let ms = |d: Duration| d.as_secs_f64() * 1e3;
         assert_eq!(cost.per_keypoint(), TileCostModel::PRIOR);
-        assert_eq!(cost.first_tiles(3), None);
+        assert_eq!(cost.first_tiles(3, false), None);
         // one tile, or tiles alike in keypoints, tell nothing of keypoints
         cost.record(&[unit(10, 100)]);
         cost.record(&[unit(10, 100), unit(12, 100)]);
         assert!((ms(cost.per_keypoint()) - ms(TileCostModel::PRIOR)).abs() < 1e-9);
         // the first tiles took 10 ms, the one second 12; a third place, not
         // reached yet, at the second's
-        assert!((ms(cost.first_tiles(1).unwrap()) - 10.0).abs() < 1e-9);
-        assert!((ms(cost.first_tiles(3).unwrap()) - 34.0).abs() < 1e-9);
-        assert_eq!(cost.first_tiles(0), Some(Duration::ZERO));
+        assert!((ms(cost.first_tiles(1, false).unwrap()) - 10.0).abs() < 1e-9);
+        assert!((ms(cost.first_tiles(3, false).unwrap()) - 34.0).abs() < 1e-9);
+        assert_eq!(cost.first_tiles(0, false), Some(Duration::ZERO));
+        // two at a time: the first pair waits for its longer tile (12 ms),
+        // the third alone (12 ms)
+        assert!((ms(cost.first_tiles(3, true).unwrap()) - 24.0).abs() < 1e-9);
         // a machine where a keypoint costs 0.05 ms: tiles of 5 ms + 0.05 ms each
         for _ in 0..200 {
             let tiles: Vec<UnitCost> = [400u64, 250, 150, 50]
@@ -351,8 +386,23 @@ mod tests {
         assert!((learnt - 0.05).abs() < 0.002, "{learnt}");
         // each place in the order at its own: 25 + 17.5 + 12.5 ms for the
         // first three (the two requests before faded to under 3 % of them)
-        let three = ms(cost.first_tiles(3).unwrap());
+        let three = ms(cost.first_tiles(3, false).unwrap());
         assert!((three - 55.0).abs() < 0.1, "{three}");
+        // two at a time: 25 + 12.5 ms
+        let paired = ms(cost.first_tiles(3, true).unwrap());
+        assert!((paired - 37.5).abs() < 0.1, "{paired}");
+    }
+
+    #[test]
+    fn a_tile_extracted_ahead_is_priced_at_its_votes() {
+        // 2 ms of votes for the 400 keypoints before: 0.005 ms each
+        let left = waiting_tile_time(2 * MS, 400, 100);
+        assert_eq!(left, MS / 2);
+        assert_eq!(waiting_tile_time(2 * MS, 0, 100), Duration::ZERO);
+        assert_eq!(waits(3, false), 3);
+        assert_eq!(waits(3, true), 2);
+        assert_eq!(waits(4, true), 2);
+        assert_eq!(waits(0, true), 0);
     }
 
     #[test]

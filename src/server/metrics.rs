@@ -195,7 +195,7 @@ fn describe() {
         FIRST_TILES_COST,
         Unit::Seconds,
         format!(
-            "What the first {} tiles of a request in the configured grid have taken lately together, each place in the order at its own mean; a time budget under it starts with the coarse pass.",
+            "What the first {} tiles of a request in the configured grid have taken lately together, each place in the order at its own mean, extracted one at a time; a time budget under it starts with the coarse pass (with a spare core, two at a time, under the longer tile of each pair).",
             crate::search::budget::TILES_TO_BEAT_THE_PASS
         )
     );
@@ -387,7 +387,7 @@ pub fn plan_costs(choice: &crate::features::CoarseChoice) {
 pub fn tile_cost(cost: &crate::search::budget::TileCostModel) {
     gauge!(KEYPOINT_COST).set(cost.per_keypoint().as_secs_f64());
     let first = crate::search::budget::TILES_TO_BEAT_THE_PASS as usize;
-    if let Some(first) = cost.first_tiles(first) {
+    if let Some(first) = cost.first_tiles(first, false) {
         gauge!(FIRST_TILES_COST).set(first.as_secs_f64());
     }
 }
