@@ -265,8 +265,7 @@ impl Localizer {
             };
         };
         let first = search::budget::TILES_TO_BEAT_THE_PASS as usize;
-        let two_at_a_time = options.spare_core.as_ref().is_some_and(|c| c.now());
-        let first_tiles = self.tile_cost.first_tiles(first, two_at_a_time);
+        let first_tiles = self.tile_cost.first_tiles(first, options.core_spare_now());
         let tight = search::budget::pass_first(budget, first_tiles);
         Plan {
             grid: TileGrid {
@@ -311,8 +310,8 @@ impl Localizer {
                 1,
             );
         }
-        let together = if two_at_a_time { 2 } else { 1 };
-        let next = &tiles.shares_left()[..together.min(tiles.shares_left().len())];
+        let left = tiles.shares_left();
+        let next = &left[..search::budget::tiles_a_wait(two_at_a_time).min(left.len())];
         let longest = next
             .iter()
             .map(|&share| self.priced(tiles, &spent.tiles, &[share]))
@@ -441,7 +440,7 @@ impl Localizer {
         let mut skipped = None;
         loop {
             // a core that would idle extracts the tile after this one
-            let mut ahead = options.spare_core.as_ref().is_some_and(|c| c.now());
+            let mut ahead = options.core_spare_now();
             // a budget ends a search only where a tile is left to skip, and
             // never before the first (after a coarse pass, with the pass's
             // votes: the next tile would start the search over); the next

@@ -124,14 +124,19 @@ pub fn waiting_tile_time(voting: Duration, voted: usize, keypoints: usize) -> Du
     }
 }
 
-/// How many waits `tiles` tiles in a row take: one each, or with two
-/// extracted at a time (the second on a spare core,
-/// [`crate::features::Tiles::extract_ahead`]) one a pair.
-pub fn waits(tiles: u32, two_at_a_time: bool) -> u32 {
+/// The tiles extracted together, in one wait: one, or with two at a time
+/// (the second on a spare core, [`crate::features::Tiles::extract_ahead`])
+/// a pair.
+pub fn tiles_a_wait(two_at_a_time: bool) -> usize {
     match two_at_a_time {
-        true => tiles.div_ceil(2),
-        false => tiles,
+        true => 2,
+        false => 1,
     }
+}
+
+/// How many waits `tiles` tiles in a row take ([`tiles_a_wait`]).
+pub fn waits(tiles: u32, two_at_a_time: bool) -> u32 {
+    tiles.div_ceil(tiles_a_wait(two_at_a_time) as u32)
 }
 
 /// The tiles whose answer beats the coarse pass's: the pass sees the whole
@@ -248,8 +253,7 @@ impl TileCostModel {
             }
             each.push(last?);
         }
-        let together = if two_at_a_time { 2 } else { 1 };
-        let waits = each.chunks(together);
+        let waits = each.chunks(tiles_a_wait(two_at_a_time));
         Some(Duration::from_secs_f64(
             waits.map(|w| w.iter().copied().fold(0.0, f64::max)).sum(),
         ))

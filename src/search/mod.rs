@@ -163,6 +163,12 @@ impl SearchOptions {
     /// 2·window + 2 leading images.
     pub const MAX_PLACE_WINDOW: u32 = 1000;
 
+    /// Whether a core would idle now ([`SearchOptions::spare_core`]; no
+    /// when the front end does not say).
+    pub fn core_spare_now(&self) -> bool {
+        self.spare_core.as_ref().is_some_and(SpareCore::now)
+    }
+
     /// `window` if it is an accepted place window, else why not: the one
     /// check behind the configuration and every `--place-window`.
     pub fn check_place_window(window: u32) -> Result<u32, String> {
