@@ -686,6 +686,12 @@ async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_cha
     let text = std::fs::read_to_string(path_for(&map)).unwrap();
     let saved: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(saved["learned"]["requests"], trials + 4, "{text}");
+    let tile_cost = |state: &Arc<AppState>| {
+        let cost = state.localizer().unwrap().tile_cost().learnt();
+        serde_json::to_value(cost).unwrap()
+    };
+    let costs = tile_cost(&first);
+    assert_eq!(saved["tile_costs"], costs, "{text}");
 
     // /map says what was learned, where it is kept, and that it was not
     // resumed
@@ -719,9 +725,17 @@ async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_cha
     );
     assert!(plan["preferred"].is_string(), "{plan}");
 
-    // the same map, machine and settings: no trials
+    // the same map, machine and settings: no trials, and the tiles priced
+    // as before from the first request on
     let second = serve(config());
     assert_eq!(learned(&second), kept);
+    assert_eq!(tile_cost(&second), costs);
+    let first_tiles = |state: &Arc<AppState>| {
+        let cost = state.localizer().unwrap();
+        cost.tile_cost().first_tiles(3, false)
+    };
+    assert!(first_tiles(&second).is_some());
+    assert_eq!(first_tiles(&second), first_tiles(&first));
     assert_eq!(plan_status(&second).await["resumed_from"], trials + 4);
     let (status, _, _) = send(&second, localize("seed=99", "application/json")).await;
     assert_eq!(status, StatusCode::OK);
@@ -732,21 +746,45 @@ async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_cha
     other.search.top_n = 3;
     let third = serve(other.clone());
     assert_eq!(learned(&third).requests, 0);
+    assert_eq!(first_tiles(&third), None);
     let memory = PlanMemory::of(&other).unwrap();
     let localizer = bowloc::server::bootstrap::load(&other, &Default::default()).unwrap();
     assert_eq!(
         memory.restore(&localizer),
         Restored::Ignored("learned for other settings".into())
     );
+    // the kept file edited by `edit`, restored into a fresh localizer
+    let restore_edited = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut saved: serde_json::Value = serde_json::from_str(&text).unwrap();
+        edit(&mut saved);
+        std::fs::write(path_for(&map), saved.to_string()).unwrap();
+        let memory = PlanMemory::of(&config()).unwrap();
+        let localizer = bowloc::server::bootstrap::load(&config(), &Default::default()).unwrap();
+        (memory.restore(&localizer), localizer)
+    };
     // another map at the same path
-    let mut saved: serde_json::Value = serde_json::from_str(&text).unwrap();
-    saved["context"]["map"] = "0123456789abcdef".into();
-    std::fs::write(path_for(&map), saved.to_string()).unwrap();
-    let memory = PlanMemory::of(&config()).unwrap();
-    let localizer = bowloc::server::bootstrap::load(&config(), &Default::default()).unwrap();
+    let (restored, _) =
+        restore_edited(&|saved| saved["context"]["map"] = "0123456789abcdef".into());
     assert_eq!(
-        memory.restore(&localizer),
+        restored,
         Restored::Ignored("learned for another map".into())
+    );
+    // a file written before tile costs were kept: the plan resumes, the
+    // tile costs are learnt afresh
+    let (restored, older) = restore_edited(&|saved| {
+        saved.as_object_mut().unwrap().remove("tile_costs");
+    });
+    assert_eq!(restored, Restored::Resumed(kept));
+    assert_eq!(older.tile_cost().first_tiles(3, false), None);
+    // tile costs no server learns: the whole file is ignored
+    let (restored, localizer) = restore_edited(&|saved| saved["tile_costs"]["xx"] = 0.0.into());
+    assert_eq!(
+        restored,
+        Restored::Ignored("its tile costs are not ones a server learns".into())
+    );
+    assert_eq!(
+        localizer.coarse_choice.as_ref().unwrap().learned().requests,
+        0
     );
     // a damaged file: the trials, and the service answers
     std::fs::write(path_for(&map), &text[..text.len() / 2]).unwrap();

@@ -264,9 +264,7 @@ impl Localizer {
                 learned: self.coarse_choice.is_some() && options.rule.info().stops_early,
             };
         };
-        let first = search::budget::TILES_TO_BEAT_THE_PASS as usize;
-        let first_tiles = self.tile_cost.first_tiles(first, options.core_spare_now());
-        let tight = search::budget::pass_first(budget, first_tiles);
+        let tight = self.tile_cost.pass_first(budget, options.core_spare_now());
         Plan {
             grid: TileGrid {
                 coarse: grid.coarse || (tight && grid.count() > 1),
@@ -453,12 +451,9 @@ impl Localizer {
                     let (next, n) = self.next_tiles_time(&tiles, &spent, two_at_a_time);
                     search::budget::next_tiles_fit(budget, started.elapsed(), next, n)
                 };
-                let fit = fits(ahead).or_else(|why| match ahead {
-                    true => fits(false).inspect(|()| ahead = false),
-                    false => Err(why),
-                });
-                if let Err(why) = fit {
-                    search.end(search::StopKind::Budget, why);
+                match search::budget::next_wait(ahead, fits) {
+                    Ok(two_at_a_time) => ahead = two_at_a_time,
+                    Err(why) => search.end(search::StopKind::Budget, why),
                 }
             }
             if search.stopped() && skipped.is_none() {

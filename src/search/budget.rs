@@ -21,10 +21,14 @@
 //!
 //! A tight budget also changes the plan: one that holds fewer than
 //! [`TILES_TO_BEAT_THE_PASS`] tiles starts with the coarse pass
-//! ([`pass_first`]), and after a pass the search starts over on the tiles
-//! only when that many fit.
+//! ([`pass_first`]; one such search in [`TileCostModel::PROBE_EVERY`]
+//! starts with the tiles, so that what they cost is still learnt), and
+//! after a pass the search starts over on the tiles only when that many
+//! fit.
 
+use serde::{Deserialize, Serialize};
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 /// The longest budget accepted: ten minutes, far past any deadline.
@@ -139,6 +143,20 @@ pub fn waits(tiles: u32, two_at_a_time: bool) -> u32 {
     tiles.div_ceil(tiles_a_wait(two_at_a_time) as u32)
 }
 
+/// Whether the next wait extracts two tiles: with `two_at_a_time`, when
+/// the next two fit together (`fits(true)`), else one, when it fits alone
+/// (`fits(false)`, and it is then extracted alone); `Err`: not even one
+/// fits, and why.
+pub fn next_wait(
+    two_at_a_time: bool,
+    fits: impl Fn(bool) -> Result<(), String>,
+) -> Result<bool, String> {
+    match two_at_a_time && fits(true).is_ok() {
+        true => Ok(true),
+        false => fits(false).map(|()| false),
+    }
+}
+
 /// The tiles whose answer beats the coarse pass's: the pass sees the whole
 /// image at half size, one or two richest tiles of four (a quarter or half
 /// of it at full size) answered worse on gardens-point, three better
@@ -191,13 +209,18 @@ pub fn next_tiles_fit(
 /// 2-vCPU Intel Xeon, docs/service.md).
 /// Both are summed over the recent requests (each request's weight fades by
 /// [`TileCostModel::FADE`] with every one after it, so the figures follow the
-/// machine's speed); the slope starts from [`TileCostModel::PRIOR`].
+/// machine's speed); the slope starts from [`TileCostModel::PRIOR`]. What
+/// it has learnt ([`TileCosts`]) can be kept and resumed, so a restart
+/// prices its first requests as the last run did.
 pub struct TileCostModel {
-    sums: Mutex<Sums>,
+    sums: Mutex<TileCosts>,
+    /// Searches whose budget the first tiles did not fit, so far.
+    too_tight: AtomicU64,
 }
 
-#[derive(Debug, Clone)]
-struct Sums {
+/// What a [`TileCostModel`] has learnt: its sums, as kept across restarts.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TileCosts {
     /// Σ (keypoints − mean) · (seconds − mean), over the tiles of each request
     xy: f64,
     /// Σ (keypoints − mean)²
@@ -217,19 +240,56 @@ impl TileCostModel {
     const PRIOR_WEIGHT: f64 = 20_000.0;
     /// Each request's share fades by this factor with every later one.
     pub const FADE: f64 = 0.99;
+    /// One search in this many whose budget would start it with the coarse
+    /// pass starts with the tiles all the same ([`TileCostModel::pass_first`]),
+    /// as the learned plan tries the plan it does not prefer one request in
+    /// 32.
+    pub const PROBE_EVERY: u64 = 32;
+
+    /// The most places in a request's order a model keeps (a grid of 64 × 64
+    /// tiles).
+    const MAX_PLACES: usize = 4096;
 
     pub fn new() -> Self {
         Self {
-            sums: Mutex::new(Sums {
+            sums: Mutex::new(TileCosts {
                 xy: Self::PRIOR.as_secs_f64() * Self::PRIOR_WEIGHT,
                 xx: Self::PRIOR_WEIGHT,
                 at: Vec::new(),
             }),
+            too_tight: AtomicU64::new(0),
         }
     }
 
-    fn sums(&self) -> std::sync::MutexGuard<'_, Sums> {
+    fn sums(&self) -> std::sync::MutexGuard<'_, TileCosts> {
         self.sums.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// What it has learnt so far.
+    pub fn learnt(&self) -> TileCosts {
+        self.sums().clone()
+    }
+
+    /// Whether it has learnt from any request.
+    pub fn has_learnt(&self) -> bool {
+        !self.sums().at.is_empty()
+    }
+
+    /// Go on from `costs` (learnt by an earlier run), unless they are not
+    /// what a model could have learnt: then why, and nothing changes.
+    pub fn resume(&self, costs: TileCosts) -> Result<(), String> {
+        let sums_ok =
+            costs.xy.is_finite() && costs.xx.is_finite() && costs.xx >= Self::PRIOR_WEIGHT;
+        let places_ok = costs.at.len() <= Self::MAX_PLACES
+            && costs
+                .at
+                .iter()
+                .all(|&(s, n)| s.is_finite() && n.is_finite() && s >= 0.0 && n >= 0.0);
+        if !(sums_ok && places_ok) {
+            return Err("its tile costs are not ones a server learns".into());
+        }
+        *self.sums() = costs;
+        Ok(())
     }
 
     /// What a keypoint adds to a tile (never negative).
@@ -259,6 +319,21 @@ impl TileCostModel {
         ))
     }
 
+    /// Whether a search under `budget` should start with the coarse pass:
+    /// when the first [`TILES_TO_BEAT_THE_PASS`] tiles, as priced now
+    /// ([`TileCostModel::first_tiles`]), are not expected to fit
+    /// ([`pass_first`]), but for one such search in
+    /// [`TileCostModel::PROBE_EVERY`]. Only a search that starts with the
+    /// tiles teaches what they cost, so without it a price too high (the
+    /// slow first requests of a process, a machine that got faster) would
+    /// hold for good on a server whose every request has that budget.
+    pub fn pass_first(&self, budget: Duration, two_at_a_time: bool) -> bool {
+        let first = self.first_tiles(TILES_TO_BEAT_THE_PASS as usize, two_at_a_time);
+        pass_first(budget, first)
+            && !(self.too_tight.fetch_add(1, Ordering::Relaxed) + 1)
+                .is_multiple_of(Self::PROBE_EVERY)
+    }
+
     /// Learn from the tiles of one request in the grid whose tiles this
     /// prices, in the order they were extracted (a coarse pass left out: its
     /// area is not a tile's); the slope from two tiles on.
@@ -269,7 +344,7 @@ impl TileCostModel {
         let (xy, xx) = slope_sums(tiles);
         let mut s = self.sums();
         if s.at.len() < tiles.len() {
-            s.at.resize(tiles.len(), (0.0, 0.0));
+            s.at.resize(tiles.len().min(Self::MAX_PLACES), (0.0, 0.0));
         }
         for (k, at) in s.at.iter_mut().enumerate() {
             *at = (at.0 * Self::FADE, at.1 * Self::FADE);
@@ -407,6 +482,92 @@ mod tests {
         assert_eq!(waits(3, true), 2);
         assert_eq!(waits(4, true), 2);
         assert_eq!(waits(0, true), 0);
+    }
+
+    #[test]
+    fn two_tiles_that_do_not_fit_together_may_fit_one_at_a_time() {
+        // the pair takes 30 ms, the next tile alone 20, 25 ms are left
+        let asked = std::cell::RefCell::new(Vec::new());
+        let fits = |left: Duration| {
+            let asked = &asked;
+            move |two: bool| {
+                asked.borrow_mut().push(two);
+                let next = if two { 30 * MS } else { 20 * MS };
+                next_tiles_fit(left, Duration::ZERO, next, 1 + two as u32)
+            }
+        };
+        assert_eq!(next_wait(true, fits(25 * MS)), Ok(false));
+        assert_eq!(asked.take(), [true, false]);
+        assert_eq!(next_wait(true, fits(30 * MS)), Ok(true));
+        assert_eq!(asked.take(), [true]);
+        // one at a time: a pair is never asked about
+        assert_eq!(next_wait(false, fits(30 * MS)), Ok(false));
+        assert_eq!(asked.take(), [false]);
+        // not even one: why, from the tile alone
+        let why = next_wait(true, fits(10 * MS)).unwrap_err();
+        assert!(
+            why.contains("the next tile would take about 20.0 ms"),
+            "{why}"
+        );
+        assert_eq!(asked.take(), [true, false]);
+    }
+
+    #[test]
+    fn what_tiles_cost_is_resumed_as_it_was_learnt() {
+        let first = TileCostModel::new();
+        assert!(!first.has_learnt());
+        first.record(&[unit(25, 500), unit(15, 300), unit(10, 100)]);
+        assert!(first.has_learnt());
+        let kept: TileCosts =
+            serde_json::from_str(&serde_json::to_string(&first.learnt()).unwrap()).unwrap();
+        let next = TileCostModel::new();
+        assert_eq!(next.first_tiles(3, false), None);
+        next.resume(kept.clone()).unwrap();
+        assert_eq!(next.per_keypoint(), first.per_keypoint());
+        assert_eq!(next.first_tiles(3, false), first.first_tiles(3, false));
+        // sums no model could have learnt are refused, and change nothing
+        let fresh = TileCostModel::new();
+        for bad in [
+            TileCosts {
+                xx: 0.0,
+                ..kept.clone()
+            },
+            TileCosts {
+                xy: f64::INFINITY,
+                ..kept.clone()
+            },
+            TileCosts {
+                at: vec![(-1.0, 1.0)],
+                ..kept.clone()
+            },
+            TileCosts {
+                at: vec![(0.01, 1.0); 5000],
+                ..kept.clone()
+            },
+        ] {
+            assert!(fresh.resume(bad).is_err());
+        }
+        assert!(!fresh.has_learnt());
+        assert_eq!(fresh.per_keypoint(), TileCostModel::PRIOR);
+    }
+
+    #[test]
+    fn one_tight_budget_in_thirty_two_starts_with_the_tiles_to_learn_them_again() {
+        let cost = TileCostModel::new();
+        // nothing learnt yet: the tiles
+        assert!(!cost.pass_first(MS, false));
+        cost.record(&[unit(20, 500), unit(15, 300), unit(10, 100)]);
+        // 45 ms for the first three: a budget of 60 ms fits them, and is not
+        // counted
+        for _ in 0..100 {
+            assert!(!cost.pass_first(60 * MS, false));
+        }
+        let started_with_tiles: Vec<usize> = (1..=100)
+            .filter(|_| !cost.pass_first(30 * MS, false))
+            .collect();
+        assert_eq!(started_with_tiles, [32, 64, 96]);
+        // two at a time the first three take 20 + 10 ms
+        assert!(!cost.pass_first(30 * MS, true));
     }
 
     #[test]

@@ -169,6 +169,7 @@ impl AppState {
         if let (Some(memory), Some(choice)) = (&self.plan_memory, &localizer.coarse_choice) {
             memory.restore_logged(&localizer);
             metrics::plan_costs(choice);
+            metrics::tile_cost(localizer.tile_cost());
         }
         if self.localizer.set(Arc::new(localizer)).is_ok() {
             metrics::ready(true);

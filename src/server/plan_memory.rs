@@ -5,7 +5,9 @@
 //! every few seconds) and when it stops, and read back when it starts. A
 //! restart then goes on from it instead of trying both plans again on its
 //! first requests, where a server whose trials came out wrong pays most
-//! (docs/performance.md, "The learned plan over query orders").
+//! (docs/performance.md, "The learned plan over query orders"). The file
+//! also keeps what tiles have cost ([`crate::search::budget::TileCosts`]),
+//! so a time budget prices a restart's first requests as the last run's.
 //!
 //! What a plan costs depends on the map, the machine and the settings, so
 //! the file names them ([`Context`]) and is used only when all three are
@@ -20,6 +22,7 @@
 use super::config::Config;
 use crate::features::Learned;
 use crate::pipeline::Localizer;
+use crate::search::budget::TileCosts;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -78,7 +81,15 @@ pub struct Saved {
     pub version: u32,
     pub context: Context,
     pub learned: Learned,
+    /// What tiles have cost (absent from a file written before it was kept:
+    /// learnt afresh).
+    #[serde(default)]
+    pub tile_costs: Option<TileCosts>,
 }
+
+/// What a save writes, but for the context's machine and settings: the
+/// plan, what tiles cost and the map file they were learnt on.
+type Kept = (Learned, TileCosts, String);
 
 /// What [`PlanMemory::restore`] found.
 #[derive(Debug, PartialEq)]
@@ -98,9 +109,8 @@ pub struct PlanMemory {
     /// The context but for the map and vocabulary, which are read at each
     /// save (a compaction writes a new map file).
     here: Context,
-    /// What the file holds now, as far as this process knows: the plan
-    /// and the map file it was learned on.
-    saved: Mutex<Option<(Learned, String)>>,
+    /// What the file holds now, as far as this process knows.
+    saved: Mutex<Option<Kept>>,
     /// The requests of the plan resumed at start (`None`: none was).
     resumed: OnceLock<u64>,
     /// A failed write was logged as a warning.
@@ -160,8 +170,8 @@ impl PlanMemory {
         }
     }
 
-    /// Resume `localizer`'s learned plan from the file, when it was learned
-    /// in the context running now.
+    /// Resume `localizer`'s learned plan, and what its tiles cost, from the
+    /// file, when they were learned in the context running now.
     pub fn restore(&self, localizer: &Localizer) -> Restored {
         let Some(choice) = &localizer.coarse_choice else {
             return Restored::Ignored("the plan is not learned".into());
@@ -184,33 +194,46 @@ impl PlanMemory {
         if let Some(why) = saved.context.differs_from(&self.context(localizer)) {
             return Restored::Ignored(format!("learned for {why}"));
         }
+        if let Some(why) = saved.learned.invalid() {
+            return Restored::Ignored(why);
+        }
+        let tile_cost = localizer.tile_cost();
+        if let Some(costs) = saved.tile_costs
+            && let Err(why) = tile_cost.resume(costs)
+        {
+            return Restored::Ignored(why);
+        }
         if let Err(why) = choice.resume(saved.learned) {
             return Restored::Ignored(why);
         }
         *self.saved.lock().unwrap_or_else(|e| e.into_inner()) =
-            Some((saved.learned, saved.context.map.clone()));
+            Some((saved.learned, tile_cost.learnt(), saved.context.map.clone()));
         let _ = self.resumed.set(saved.learned.requests);
         Restored::Resumed(saved.learned)
     }
 
-    /// Write `localizer`'s learned plan to the file when it, or the map
-    /// file (a compaction), changed since the last write (atomically: a
-    /// reader sees the old file or the new). Returns whether it wrote.
+    /// Write `localizer`'s learned plan and what its tiles cost to the file
+    /// when they, or the map file (a compaction), changed since the last
+    /// write, and something was learnt (atomically: a reader sees the old
+    /// file or the new). Returns whether it wrote.
     pub fn save(&self, localizer: &Localizer) -> bool {
         let Some(choice) = &localizer.coarse_choice else {
             return false;
         };
         let learned = choice.learned();
+        let tile_cost = localizer.tile_cost();
         let context = self.context(localizer);
         let mut saved = self.saved.lock().unwrap_or_else(|e| e.into_inner());
-        let now = (learned, context.map.clone());
-        if saved.as_ref() == Some(&now) || learned.requests == 0 {
+        let now = (learned, tile_cost.learnt(), context.map.clone());
+        let learnt = learned.requests > 0 || tile_cost.has_learnt();
+        if saved.as_ref() == Some(&now) || !learnt {
             return false;
         }
         let file = Saved {
             version: VERSION,
             context,
             learned,
+            tile_costs: Some(now.1.clone()),
         };
         let written = crate::store::write_atomic(&self.path, |w| {
             serde_json::to_writer_pretty(&mut *w, &file)?;
@@ -237,12 +260,17 @@ impl PlanMemory {
     /// [`PlanMemory::restore`], logged.
     pub fn restore_logged(&self, localizer: &Localizer) {
         let path = self.path.display();
+        let first = crate::search::budget::TILES_TO_BEAT_THE_PASS as usize;
         match self.restore(localizer) {
             Restored::Resumed(l) => tracing::info!(
                 file = %path,
                 requests = l.requests,
                 tiles_ms = l.tiles.typical_ms(),
                 coarse_ms = l.coarse.typical_ms(),
+                first_tiles_ms = ?localizer
+                    .tile_cost()
+                    .first_tiles(first, false)
+                    .map(|d| d.as_secs_f64() * 1e3),
                 "learned plan resumed"
             ),
             Restored::Missing => {
