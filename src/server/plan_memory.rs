@@ -261,16 +261,17 @@ impl PlanMemory {
     pub fn restore_logged(&self, localizer: &Localizer) {
         let path = self.path.display();
         let first = crate::search::budget::TILES_TO_BEAT_THE_PASS as usize;
+        let first_tiles_ms = || match localizer.tile_cost().first_tiles(first, false) {
+            Some(t) => format!("{:.1}", t.as_secs_f64() * 1e3),
+            None => "not learnt".into(),
+        };
         match self.restore(localizer) {
             Restored::Resumed(l) => tracing::info!(
                 file = %path,
                 requests = l.requests,
                 tiles_ms = l.tiles.typical_ms(),
                 coarse_ms = l.coarse.typical_ms(),
-                first_tiles_ms = ?localizer
-                    .tile_cost()
-                    .first_tiles(first, false)
-                    .map(|d| d.as_secs_f64() * 1e3),
+                first_tiles_ms = %first_tiles_ms(),
                 "learned plan resumed"
             ),
             Restored::Missing => {
