@@ -264,7 +264,9 @@ impl Localizer {
                 learned: self.coarse_choice.is_some() && options.rule.info().stops_early,
             };
         };
-        let tight = self.tile_cost.pass_first(budget, options.core_spare_now());
+        let first = search::budget::TILES_TO_BEAT_THE_PASS as usize;
+        let first_tiles = self.tile_cost.first_tiles(first, options.core_spare_now());
+        let tight = search::budget::pass_first(budget, first_tiles);
         Plan {
             grid: TileGrid {
                 coarse: grid.coarse || (tight && grid.count() > 1),

@@ -21,14 +21,11 @@
 //!
 //! A tight budget also changes the plan: one that holds fewer than
 //! [`TILES_TO_BEAT_THE_PASS`] tiles starts with the coarse pass
-//! ([`pass_first`]; one such search in [`TileCostModel::PROBE_EVERY`]
-//! starts with the tiles, so that what they cost is still learnt), and
-//! after a pass the search starts over on the tiles only when that many
-//! fit.
+//! ([`pass_first`]), and after a pass the search starts over on the tiles
+//! only when that many fit.
 
 use serde::{Deserialize, Serialize};
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 /// The longest budget accepted: ten minutes, far past any deadline.
@@ -214,8 +211,6 @@ pub fn next_tiles_fit(
 /// prices its first requests as the last run did.
 pub struct TileCostModel {
     sums: Mutex<TileCosts>,
-    /// Searches whose budget the first tiles did not fit, so far.
-    too_tight: AtomicU64,
 }
 
 /// What a [`TileCostModel`] has learnt: its sums, as kept across restarts.
@@ -240,11 +235,6 @@ impl TileCostModel {
     const PRIOR_WEIGHT: f64 = 20_000.0;
     /// Each request's share fades by this factor with every later one.
     pub const FADE: f64 = 0.99;
-    /// One search in this many whose budget would start it with the coarse
-    /// pass starts with the tiles all the same ([`TileCostModel::pass_first`]),
-    /// as the learned plan tries the plan it does not prefer one request in
-    /// 32.
-    pub const PROBE_EVERY: u64 = 32;
 
     /// The most places in a request's order a model keeps (a grid of 64 × 64
     /// tiles).
@@ -257,7 +247,6 @@ impl TileCostModel {
                 xx: Self::PRIOR_WEIGHT,
                 at: Vec::new(),
             }),
-            too_tight: AtomicU64::new(0),
         }
     }
 
@@ -317,21 +306,6 @@ impl TileCostModel {
         Some(Duration::from_secs_f64(
             waits.map(|w| w.iter().copied().fold(0.0, f64::max)).sum(),
         ))
-    }
-
-    /// Whether a search under `budget` should start with the coarse pass:
-    /// when the first [`TILES_TO_BEAT_THE_PASS`] tiles, as priced now
-    /// ([`TileCostModel::first_tiles`]), are not expected to fit
-    /// ([`pass_first`]), but for one such search in
-    /// [`TileCostModel::PROBE_EVERY`]. Only a search that starts with the
-    /// tiles teaches what they cost, so without it a price too high (the
-    /// slow first requests of a process, a machine that got faster) would
-    /// hold for good on a server whose every request has that budget.
-    pub fn pass_first(&self, budget: Duration, two_at_a_time: bool) -> bool {
-        let first = self.first_tiles(TILES_TO_BEAT_THE_PASS as usize, two_at_a_time);
-        pass_first(budget, first)
-            && !(self.too_tight.fetch_add(1, Ordering::Relaxed) + 1)
-                .is_multiple_of(Self::PROBE_EVERY)
     }
 
     /// Learn from the tiles of one request in the grid whose tiles this
@@ -549,25 +523,6 @@ mod tests {
         }
         assert!(!fresh.has_learnt());
         assert_eq!(fresh.per_keypoint(), TileCostModel::PRIOR);
-    }
-
-    #[test]
-    fn one_tight_budget_in_thirty_two_starts_with_the_tiles_to_learn_them_again() {
-        let cost = TileCostModel::new();
-        // nothing learnt yet: the tiles
-        assert!(!cost.pass_first(MS, false));
-        cost.record(&[unit(20, 500), unit(15, 300), unit(10, 100)]);
-        // 45 ms for the first three: a budget of 60 ms fits them, and is not
-        // counted
-        for _ in 0..100 {
-            assert!(!cost.pass_first(60 * MS, false));
-        }
-        let started_with_tiles: Vec<usize> = (1..=100)
-            .filter(|_| !cost.pass_first(30 * MS, false))
-            .collect();
-        assert_eq!(started_with_tiles, [32, 64, 96]);
-        // two at a time the first three take 20 + 10 ms
-        assert!(!cost.pass_first(30 * MS, true));
     }
 
     #[test]
