@@ -463,6 +463,50 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
     );
 }
 
+/// With a learned plan, a request with a time budget teaches the plan what
+/// it cost when the budget neither chose its plan nor ended its search, so
+/// a server whose every request has a budget still learns which plan costs
+/// less. A budget too tight for the tiles (it chose the coarse pass) or one
+/// that ended the search teaches nothing.
+#[test]
+fn a_budget_that_chose_no_plan_and_cut_no_search_teaches_the_learned_plan() {
+    use bowloc::features::CoarseChoice;
+    use bowloc::search::StopKind;
+    use std::time::Duration;
+    let real = common::real_map("rtabmap-loop", 1000);
+    let mut localizer = real.localizer(true);
+    localizer.tiles = "2x2+24".parse().unwrap();
+    localizer.coarse_choice = Some(CoarseChoice::default());
+    let taught = |l: &bowloc::pipeline::Localizer| {
+        let (plain, coarse) = l.coarse_choice.as_ref().unwrap().arms();
+        plain.samples + coarse.samples
+    };
+    let under = |budget: Duration, seed: u64| SearchOptions {
+        rule: RuleSpec::new("place-z", Some(2.0)).unwrap(),
+        budget: Some(budget),
+        seed,
+        ..Default::default()
+    };
+    let queries: Vec<_> = real.data.queries.iter().step_by(11).collect();
+    // a budget every plan fits in: each request teaches
+    for (seed, q) in queries.iter().enumerate() {
+        let answer = localizer
+            .localize_file(&q.path, &under(Duration::from_secs(600), seed as u64), None)
+            .unwrap();
+        assert_ne!(answer.stop.kind, StopKind::Budget, "{}", q.name);
+    }
+    assert_eq!(taught(&localizer), queries.len() as u64);
+    // a budget that ends every search after its first unit, or one too
+    // tight for the tiles as they have cost, teaches nothing
+    for (seed, q) in queries.iter().enumerate() {
+        let tight = under(Duration::from_micros(1), seed as u64);
+        assert!(!localizer.plan(&tight, None).learned());
+        let answer = localizer.localize_file(&q.path, &tight, None).unwrap();
+        assert_eq!(answer.stop.kind, StopKind::Budget, "{}", q.name);
+    }
+    assert_eq!(taught(&localizer), queries.len() as u64);
+}
+
 /// A spare core extracts the next tile together with the one after it
 /// (`server.tiles_ahead`): the features, the search and its answer are the
 /// same as one tile at a time; a search that stops with a tile extracted

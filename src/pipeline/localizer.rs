@@ -258,10 +258,11 @@ impl Localizer {
             },
             None => TileGrid::WHOLE,
         };
+        let drawn = self.coarse_choice.is_some() && options.rule.info().stops_early;
         let Some(budget) = options.budget else {
             return Plan {
                 grid,
-                learned: self.coarse_choice.is_some() && options.rule.info().stops_early,
+                learned: drawn,
             };
         };
         let first = search::budget::TILES_TO_BEAT_THE_PASS as usize;
@@ -272,8 +273,9 @@ impl Localizer {
                 coarse: grid.coarse || (tight && grid.count() > 1),
                 ..grid
             },
-            // the budget may choose the plan and end it: it teaches nothing
-            learned: false,
+            // a plan the budget chose teaches nothing (nor does a search the
+            // budget ended: Localizer::learn)
+            learned: drawn && !tight,
         }
     }
 
@@ -352,10 +354,12 @@ impl Localizer {
     }
 
     /// Tell the learned coarse pass what `answer` cost, when `plan` was its
-    /// choice.
+    /// choice and no time budget ended the search (a budget cuts a plan's
+    /// slow requests short: they would make it look cheaper than it is).
     pub fn learn(&self, plan: Plan, answer: &Localization) {
         if let Some(choice) = &self.coarse_choice
             && plan.learned
+            && answer.stop.kind != search::StopKind::Budget
         {
             let t = &answer.timings_ms;
             choice.record(
