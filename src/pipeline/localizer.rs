@@ -62,7 +62,8 @@ impl Spent {
 pub struct Plan {
     pub grid: TileGrid,
     /// The grid is the learned coarse pass's choice ([`CoarseChoice`]), so
-    /// what the answer cost teaches it ([`Localizer::learn`]).
+    /// what the answer cost teaches it ([`Localizer::learn`]), unless a time
+    /// budget ended the search.
     learned: bool,
 }
 
