@@ -355,8 +355,9 @@ impl Localizer {
     }
 
     /// Tell the learned coarse pass what `answer` cost, when `plan` was its
-    /// choice and no time budget ended the search (a budget cuts a plan's
-    /// slow requests short: they would make it look cheaper than it is).
+    /// choice and no time budget ended the search (a search cut right after
+    /// the coarse pass would count as one the pass ended, and the cut's time
+    /// as the plan's).
     pub fn learn(&self, plan: Plan, answer: &Localization) {
         if let Some(choice) = &self.coarse_choice
             && plan.learned
