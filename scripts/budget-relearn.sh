@@ -2,7 +2,7 @@
 # A server whose every request has a time budget: what it learns, and
 # whether tile prices learnt on a slower machine come back. A live
 # `bowloc serve` (gardens-point with K = 5000, or rtabmap-loop with K = 1000;
-# vocabulary seed 1, default configuration) first answers RELEARN_SLOW requests (8) without a budget
+# vocabulary seed RELEARN_SEED, default 1; default configuration) first answers RELEARN_SLOW requests (8) without a budget
 # while two busy loops share its two cores, so the tiles it learns from cost
 # more than they will; then the loops stop and it answers REQUESTS requests
 # with budget_ms=BUDGET, the queries in turn, one at a time. Prints, per
@@ -12,7 +12,7 @@
 # first three tiles' learnt time (`bowloc_tile_first_tiles_seconds`) after
 # the slow requests and at the end.
 #
-#   [RELEARN_DATASET=rtabmap-loop] [RELEARN_BASELINE=BIN] [RELEARN_PLAN=GRID] scripts/budget-relearn.sh [BUDGET] [REQUESTS]
+#   [RELEARN_DATASET=rtabmap-loop] [RELEARN_SEED=2] [RELEARN_BASELINE=BIN] [RELEARN_PLAN=GRID] scripts/budget-relearn.sh [BUDGET] [REQUESTS]
 #
 # BUDGET: milliseconds (default 90); REQUESTS: default 256.
 # RELEARN_PLAN: the extraction plan (search.tiles), e.g. "2x2+24" for the
@@ -28,6 +28,7 @@ budget=${1:-90}
 requests=${2:-256}
 slow=${RELEARN_SLOW:-8}
 name=${RELEARN_DATASET:-gardens-point}
+seed=${RELEARN_SEED:-1}
 src=../shared/datasets/$name
 tmp=$(mktemp -d)
 hogs=""
@@ -37,8 +38,8 @@ cargo build --release --quiet
 baseline=${RELEARN_BASELINE:-}
 [ -z "$baseline" ] || [ -x "$baseline" ] || { echo "RELEARN_BASELINE: $baseline is not an executable" >&2; exit 2; }
 case $name in
-  gardens-point) gardens_map 5000 1 >&2; dir=data/gardens-5000 ;;
-  rtabmap-loop) load_map 1 >&2; dir=data/load ;;
+  gardens-point) gardens_map 5000 "$seed" >&2; dir=$(map_dir data/gardens-5000 "$seed") ;;
+  rtabmap-loop) load_map "$seed" >&2; dir=$(map_dir data/load "$seed") ;;
   *) echo "RELEARN_DATASET: gardens-point or rtabmap-loop, not $name" >&2; exit 2 ;;
 esac
 plan=${RELEARN_PLAN:+[search]
@@ -85,7 +86,7 @@ for ((i = 0; i < requests; i++)); do
         >>"$tmp/rows"
   done
 done
-echo "$name, plan ${RELEARN_PLAN:-of the configuration}, budget $budget ms, $slow requests with two busy loops first; $(lscpu | sed -n 's/^Model name: *//p')"
+echo "$name (vocabulary seed $seed), plan ${RELEARN_PLAN:-of the configuration}, budget $budget ms, $slow requests with two busy loops first; $(lscpu | sed -n 's/^Model name: *//p')"
 for k in "${!addrs[@]}"; do
   echo "${labels[k]}: first three tiles learnt at ${learnt[k]} ms after the slow requests, $(first_tiles_ms "${addrs[k]}") ms at the end"
   python3 - "$tmp/rows" "$k" "$src/ground_truth.csv" <<'PY'

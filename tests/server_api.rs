@@ -732,7 +732,7 @@ async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_cha
     assert_eq!(tile_cost(&second), costs);
     let first_tiles = |state: &Arc<AppState>| {
         let cost = state.localizer().unwrap();
-        cost.tile_cost().first_tiles(3, false)
+        cost.tile_cost().tiles_to_beat_the_pass(false)
     };
     assert!(first_tiles(&second).is_some());
     assert_eq!(first_tiles(&second), first_tiles(&first));
@@ -775,7 +775,7 @@ async fn a_restart_goes_on_from_the_kept_plan_when_nothing_it_was_learned_on_cha
         saved.as_object_mut().unwrap().remove("tile_costs");
     });
     assert_eq!(restored, Restored::Resumed(kept));
-    assert_eq!(older.tile_cost().first_tiles(3, false), None);
+    assert_eq!(older.tile_cost().tiles_to_beat_the_pass(false), None);
     // tile costs no server learns: the whole file is ignored
     let (restored, localizer) = restore_edited(&|saved| saved["tile_costs"]["xx"] = 0.0.into());
     assert_eq!(

@@ -266,8 +266,9 @@ impl Localizer {
                 learned: drawn,
             };
         };
-        let first = search::budget::TILES_TO_BEAT_THE_PASS as usize;
-        let first_tiles = self.tile_cost.first_tiles(first, options.core_spare_now());
+        let first_tiles = self
+            .tile_cost
+            .tiles_to_beat_the_pass(options.core_spare_now());
         let tight = search::budget::pass_first(budget, first_tiles);
         Plan {
             grid: TileGrid {

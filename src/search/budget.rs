@@ -308,6 +308,13 @@ impl TileCostModel {
         ))
     }
 
+    /// How long a request waits for the first [`TILES_TO_BEAT_THE_PASS`]
+    /// tiles ([`TileCostModel::first_tiles`]): what a budget is held
+    /// against to start with the coarse pass ([`pass_first`]).
+    pub fn tiles_to_beat_the_pass(&self, two_at_a_time: bool) -> Option<Duration> {
+        self.first_tiles(TILES_TO_BEAT_THE_PASS as usize, two_at_a_time)
+    }
+
     /// Learn from the tiles of one request in the grid whose tiles this
     /// prices, in the order they were extracted (a coarse pass left out: its
     /// area is not a tile's); the slope from two tiles on.

@@ -386,8 +386,7 @@ pub fn plan_costs(choice: &crate::features::CoarseChoice) {
 /// first tiles a time budget plans on.
 pub fn tile_cost(cost: &crate::search::budget::TileCostModel) {
     gauge!(KEYPOINT_COST).set(cost.per_keypoint().as_secs_f64());
-    let first = crate::search::budget::TILES_TO_BEAT_THE_PASS as usize;
-    if let Some(first) = cost.first_tiles(first, false) {
+    if let Some(first) = cost.tiles_to_beat_the_pass(false) {
         gauge!(FIRST_TILES_COST).set(first.as_secs_f64());
     }
 }

@@ -260,8 +260,7 @@ impl PlanMemory {
     /// [`PlanMemory::restore`], logged.
     pub fn restore_logged(&self, localizer: &Localizer) {
         let path = self.path.display();
-        let first = crate::search::budget::TILES_TO_BEAT_THE_PASS as usize;
-        let first_tiles_ms = || match localizer.tile_cost().first_tiles(first, false) {
+        let first_tiles_ms = || match localizer.tile_cost().tiles_to_beat_the_pass(false) {
             Some(t) => format!("{:.1}", t.as_secs_f64() * 1e3),
             None => "not learnt".into(),
         };
