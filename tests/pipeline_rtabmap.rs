@@ -507,6 +507,35 @@ fn a_budget_that_chose_no_plan_and_cut_no_search_teaches_the_learned_plan() {
     assert_eq!(taught(&localizer), queries.len() as u64);
 }
 
+/// The warm-up a server runs on each worker before it is ready extracts a
+/// synthetic query through the configured grid (the coarse pass and every
+/// tile, two at a time or not) and teaches nothing: neither what tiles cost
+/// nor the learned plan; a real query after it does.
+#[test]
+fn the_warm_up_extracts_and_teaches_nothing() {
+    use bowloc::features::CoarseChoice;
+    let real = common::real_map("rtabmap-loop", 1000);
+    let mut localizer = real.localizer(true);
+    localizer.tiles = "2x2+24".parse().unwrap();
+    localizer.coarse_choice = Some(CoarseChoice::default());
+    let taught = |l: &bowloc::pipeline::Localizer| {
+        let (plain, coarse) = l.coarse_choice.as_ref().unwrap().arms();
+        (plain.samples + coarse.samples, l.tile_cost().has_learnt())
+    };
+    for pairs in [false, true] {
+        assert!(localizer.warm_up(pairs).unwrap() > 0, "pairs {pairs}");
+    }
+    assert_eq!(taught(&localizer), (0, false));
+    let options = SearchOptions {
+        rule: RuleSpec::new("place-z", Some(2.0)).unwrap(),
+        ..Default::default()
+    };
+    localizer
+        .localize_file(&real.data.queries[0].path, &options, None)
+        .unwrap();
+    assert_eq!(taught(&localizer), (1, true));
+}
+
 /// A spare core extracts the next tile together with the one after it
 /// (`server.tiles_ahead`): the features, the search and its answer are the
 /// same as one tile at a time; a search that stops with a tile extracted

@@ -11,6 +11,7 @@ mod extract;
 pub mod fit;
 mod thumbnail;
 mod tiles;
+mod warm;
 
 pub use buffers::{Buffers, KEEP_BUFFERS_VAR, keep_image_buffers};
 pub use coarse_choice::{CoarseChoice, Learned};
@@ -19,6 +20,7 @@ pub use decode::{DecodeLimits, GrayImage, SUPPORTED_FORMATS, decode, decode_file
 pub use extract::{Descriptors, Features, Frame, Region, Timed, extract, extract_file};
 pub use thumbnail::thumbnail;
 pub use tiles::{TileGrid, TilePlan, Tiles, TilesAhead};
+pub use warm::warm_up_image;
 
 /// Why an image yielded no descriptors.
 #[derive(Debug, thiserror::Error)]

@@ -398,6 +398,48 @@ impl Localizer {
         verify: bool,
         tracing: Tracing,
     ) -> Result<Localization, FeatureError> {
+        self.answer(bytes, options, grid, verify, tracing, true)
+    }
+
+    /// Answer a synthetic query ([`features::warm_up_image`]) on this
+    /// thread, as a streamed query of the configured grid is answered (the
+    /// coarse pass first when the grid has tiles, then every tile; two at a
+    /// time with `pairs`, as on a spare core, then verified when the
+    /// answers are), so that the requests after it do not pay for the
+    /// thread's first extraction. It teaches nothing: neither the learned
+    /// plan nor what tiles cost. Returns the features it extracted.
+    pub fn warm_up(&self, pairs: bool) -> Result<usize, FeatureError> {
+        let bytes = features::warm_up_image(&self.extract)?;
+        let options = SearchOptions {
+            spare_core: Some(search::SpareCore::new(move || pairs)),
+            ..SearchOptions::default()
+        };
+        let grid = TileGrid {
+            coarse: self.tiles.count() > 1,
+            ..self.tiles
+        };
+        let answer = self.answer(
+            &bytes,
+            &options,
+            grid,
+            self.verify.enabled,
+            Tracing::Off,
+            false,
+        )?;
+        Ok(answer.features.total)
+    }
+
+    /// [`Localizer::localize_traced`], teaching what the configured grid's
+    /// tiles cost when `learn_tile_costs`.
+    fn answer(
+        &self,
+        bytes: &[u8],
+        options: &SearchOptions,
+        grid: TileGrid,
+        verify: bool,
+        tracing: Tracing,
+        learn_tile_costs: bool,
+    ) -> Result<Localization, FeatureError> {
         // a geometric stop verified its leader: its answer is verified too
         let verify = verify || options.rule.geometric();
         let (searched, options) = match verify {
@@ -525,7 +567,7 @@ impl Localizer {
             }
         }
         // what the tiles of the configured grid cost (not a grid asked for)
-        if spent.configured {
+        if spent.configured && learn_tile_costs {
             self.tile_cost.record(&spent.tiles);
         }
         let extraction = Extraction {

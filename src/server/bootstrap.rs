@@ -35,7 +35,7 @@ impl Default for Progress {
 
 impl Progress {
     /// Begin a step that does not count.
-    fn begin(&self, step: impl Into<String>) {
+    pub(super) fn begin(&self, step: impl Into<String>) {
         self.bar.set_length(0);
         self.bar.set_position(0);
         self.bar.set_message(step.into());

@@ -179,6 +179,10 @@ pub struct ServerConfig {
     /// While a core would idle, a streamed query extracts its next tile
     /// together with the one after it, on that core.
     pub tiles_ahead: bool,
+    /// Before the service is ready, each worker extracts a synthetic image,
+    /// so that the first requests do not pay for a thread's first
+    /// extraction.
+    pub warm_up: bool,
     pub log_format: LogFormat,
     /// Connections open at once; beyond, new ones wait in the listen backlog.
     pub max_connections: usize,
@@ -311,6 +315,7 @@ impl Default for ServerConfig {
             workers: 0,
             opencv_threads: 1,
             tiles_ahead: true,
+            warm_up: true,
             log_format: LogFormat::Human,
             max_connections: 256,
             header_timeout_ms: 10_000,

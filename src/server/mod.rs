@@ -144,7 +144,8 @@ impl AppState {
     }
 
     /// Make the service ready with this vocabulary and map.
-    pub fn set_localizer(&self, localizer: Localizer) {
+    pub fn set_localizer(&self, localizer: impl Into<Arc<Localizer>>) {
+        let localizer: Arc<Localizer> = localizer.into();
         let snapshot = localizer.map.snapshot();
         metrics::map_loaded(&*snapshot);
         let m = snapshot.meta();
@@ -171,8 +172,48 @@ impl AppState {
             metrics::plan_costs(choice);
             metrics::tile_cost(localizer.tile_cost());
         }
-        if self.localizer.set(Arc::new(localizer)).is_ok() {
+        if self.localizer.set(localizer).is_ok() {
             metrics::ready(true);
+        }
+    }
+
+    /// Answer a synthetic query on every worker ([`Localizer::warm_up`]),
+    /// as `server.warm_up` asks, so that the first requests do not pay for
+    /// what a thread's first extraction maps in and sets up. A failure only costs those requests the time.
+    async fn warm_workers(&self, localizer: &Arc<Localizer>) {
+        if !self.config.server.warm_up {
+            return;
+        }
+        self.loading.begin("warming up the workers");
+        // one worker also readies the thread of a tile pair on a spare core
+        // (one at a time is what a lightly loaded server runs; a warm-up on
+        // every worker would keep as many threads' memory)
+        let pairs = self
+            .config
+            .server
+            .tiles_ahead
+            .then(|| AtomicBool::new(true));
+        let localizer = localizer.clone();
+        let started = std::time::Instant::now();
+        let warmed = self
+            .pool
+            .on_every_worker(Duration::from_secs(5), move || {
+                let pair = pairs
+                    .as_ref()
+                    .is_some_and(|p| p.swap(false, Ordering::SeqCst));
+                localizer.warm_up(pair)
+            })
+            .await;
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        match warmed.iter().find_map(|w| match w {
+            Ok(Ok(_)) => None,
+            Ok(Err(e)) => Some(e.to_string()),
+            Err(e) => Some(e.to_string()),
+        }) {
+            None => tracing::info!(workers = warmed.len(), ms, "workers warmed up"),
+            Some(e) => tracing::warn!(
+                "warming up the workers failed ({e}); the first requests will take longer"
+            ),
         }
     }
 
@@ -396,6 +437,8 @@ pub async fn serve(
                         // each worker runs one query on one core and OpenCV
                         // does not fan out too (docs/performance.md).
                         crate::features::set_opencv_threads(state.config.server.opencv_threads);
+                        let localizer = Arc::new(localizer);
+                        state.warm_workers(&localizer).await;
                         state.set_localizer(localizer);
                         compactor = schedule_compaction(&state);
                     }

@@ -195,6 +195,38 @@ impl WorkerPool {
 }
 
 impl WorkerPool {
+    /// Run `job` once on every worker and wait for them all: work that
+    /// prepares a worker's thread, before the service takes requests. A
+    /// worker that takes its job waits, up to `meet`, for the others to take
+    /// theirs, so that none takes two (one busy with something else that
+    /// long lets another take its turn).
+    pub async fn on_every_worker<T: Send + 'static>(
+        &self,
+        meet: Duration,
+        job: impl Fn() -> T + Send + Sync + 'static,
+    ) -> Vec<Result<T, PoolError>> {
+        let job = Arc::new(job);
+        let met = Arc::new((Mutex::new(0usize), Condvar::new()));
+        let mut all = tokio::task::JoinSet::new();
+        for _ in 0..self.workers {
+            let (pool, job, met, n) = (self.clone(), job.clone(), met.clone(), self.workers);
+            all.spawn(async move {
+                let once = move || {
+                    let (here, all_here) = &*met;
+                    let mut count = here.lock().expect("never poisoned");
+                    *count += 1;
+                    all_here.notify_all();
+                    drop(all_here.wait_timeout_while(count, meet, |count| *count < n));
+                    job()
+                };
+                pool.run(None, once).await
+            });
+        }
+        all.join_all().await
+    }
+}
+
+impl WorkerPool {
     /// Stop the workers once the jobs already queued are done, and wait up to
     /// `timeout` for them to end. Returns whether they all did. For the end
     /// of the service, once no more jobs will come.
@@ -267,6 +299,36 @@ mod tests {
             .await
         });
         (handle, release, started)
+    }
+
+    #[tokio::test]
+    async fn every_worker_runs_the_job_once() {
+        let pool = WorkerPool::new(3, 0);
+        let name = || std::thread::current().name().map(String::from);
+        let mut ran: Vec<_> = pool
+            .on_every_worker(Duration::from_secs(10), name)
+            .await
+            .into_iter()
+            .map(|r| r.unwrap().unwrap())
+            .collect();
+        ran.sort();
+        assert_eq!(
+            ran,
+            ["bowloc-worker-0", "bowloc-worker-1", "bowloc-worker-2"]
+        );
+        // and the pool is as before
+        assert_eq!((pool.busy(), pool.admitted()), (0, 0));
+    }
+
+    #[tokio::test]
+    async fn a_busy_worker_lets_another_take_its_turn() {
+        let pool = WorkerPool::new(2, 2);
+        let (blocked, release, started) = blocking_job(&pool);
+        started.await.unwrap();
+        let ran = pool.on_every_worker(Duration::from_millis(50), || 1).await;
+        assert_eq!(ran, [Ok(1), Ok(1)]);
+        release.send(()).unwrap();
+        assert_eq!(blocked.await.unwrap(), Ok(7));
     }
 
     #[tokio::test]

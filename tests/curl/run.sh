@@ -137,6 +137,11 @@ else
 fi
 MAIN_BASE=$BASE
 MAIN_PID=$PID
+# each of the 2 workers extracted once before the server said it was ready
+warmed_before_ready() {
+  awk '/workers warmed up workers=2 / {w = NR} / ready map=/ {r = NR} END {exit !(w && r && w < r)}' "$TMP/server.log"
+}
+check "both workers warmed up before the server was ready" warmed_before_ready
 
 # req OUT ARGS...: curl, body to OUT, prints the status code.
 req() { local out=$1; shift; curl -s -o "$out" -w '%{http_code}' "$@"; }
