@@ -6,6 +6,7 @@ mod common;
 
 use bowloc::dataset::Dataset;
 use bowloc::features::{DecodeLimits, ExtractConfig};
+use bowloc::pipeline::Localizer;
 use bowloc::search::{RuleSpec, SearchOptions};
 use std::process::Command;
 
@@ -463,6 +464,22 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
     );
 }
 
+/// The rtabmap-loop map streamed in `2x2+24` tiles with the coarse pass
+/// learned, as the service runs it.
+fn learning_localizer(real: &common::RealMap) -> Localizer {
+    let mut localizer = real.localizer(true);
+    localizer.tiles = "2x2+24".parse().unwrap();
+    localizer.coarse_choice = Some(bowloc::features::CoarseChoice::default());
+    localizer
+}
+
+/// What `l` was taught: the requests its learned plan counted, and whether
+/// it learnt what tiles cost.
+fn plans_taught(l: &Localizer) -> (u64, bool) {
+    let (plain, coarse) = l.coarse_choice.as_ref().unwrap().arms();
+    (plain.samples + coarse.samples, l.tile_cost().has_learnt())
+}
+
 /// With a learned plan, a request with a time budget teaches the plan what
 /// it cost when the budget neither chose its plan nor ended its search, so
 /// a server whose every request has a budget still learns which plan costs
@@ -470,17 +487,11 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
 /// that ended the search teaches nothing.
 #[test]
 fn a_budget_that_chose_no_plan_and_cut_no_search_teaches_the_learned_plan() {
-    use bowloc::features::CoarseChoice;
     use bowloc::search::StopKind;
     use std::time::Duration;
     let real = common::real_map("rtabmap-loop", 1000);
-    let mut localizer = real.localizer(true);
-    localizer.tiles = "2x2+24".parse().unwrap();
-    localizer.coarse_choice = Some(CoarseChoice::default());
-    let taught = |l: &bowloc::pipeline::Localizer| {
-        let (plain, coarse) = l.coarse_choice.as_ref().unwrap().arms();
-        plain.samples + coarse.samples
-    };
+    let localizer = learning_localizer(&real);
+    let taught = |l: &Localizer| plans_taught(l).0;
     let under = |budget: Duration, seed: u64| SearchOptions {
         rule: RuleSpec::new("place-z", Some(2.0)).unwrap(),
         budget: Some(budget),
@@ -513,15 +524,9 @@ fn a_budget_that_chose_no_plan_and_cut_no_search_teaches_the_learned_plan() {
 /// nor the learned plan; a real query after it does.
 #[test]
 fn the_warm_up_extracts_and_teaches_nothing() {
-    use bowloc::features::CoarseChoice;
     let real = common::real_map("rtabmap-loop", 1000);
-    let mut localizer = real.localizer(true);
-    localizer.tiles = "2x2+24".parse().unwrap();
-    localizer.coarse_choice = Some(CoarseChoice::default());
-    let taught = |l: &bowloc::pipeline::Localizer| {
-        let (plain, coarse) = l.coarse_choice.as_ref().unwrap().arms();
-        (plain.samples + coarse.samples, l.tile_cost().has_learnt())
-    };
+    let localizer = learning_localizer(&real);
+    let taught = plans_taught;
     for pairs in [false, true] {
         assert!(localizer.warm_up(pairs).unwrap() > 0, "pairs {pairs}");
     }

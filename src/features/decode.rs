@@ -30,7 +30,7 @@ pub struct GrayImage {
     /// 1/8 of it ([`decode`]).
     pub(super) pixels: Mat,
     /// Width and height of the image as sent (its EXIF orientation applied).
-    pub(super) size: [u32; 2],
+    size: [u32; 2],
 }
 
 impl GrayImage {

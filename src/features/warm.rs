@@ -6,7 +6,7 @@
 //! [`warm_up_image`] on each worker before it says it is ready, so that its
 //! first requests do not pay (docs/performance.md, "Warm workers").
 
-use super::{ExtractConfig, FeatureError, GrayImage};
+use super::{ExtractConfig, FeatureError};
 use opencv::core::{CV_8UC1, Mat, Scalar, Vector};
 use opencv::prelude::*;
 
@@ -21,7 +21,7 @@ pub fn warm_up_image(config: &ExtractConfig) -> Result<Vec<u8>, FeatureError> {
     };
     let image = textured(side.max(2), (side * 9 / 16).max(2))?;
     let mut jpeg = Vector::<u8>::new();
-    opencv::imgcodecs::imencode(".jpg", &image.pixels, &mut jpeg, &Vector::new())?;
+    opencv::imgcodecs::imencode(".jpg", &image, &mut jpeg, &Vector::new())?;
     Ok(jpeg.to_vec())
 }
 
@@ -30,7 +30,7 @@ pub fn warm_up_image(config: &ExtractConfig) -> Result<Vec<u8>, FeatureError> {
 /// its whole scale space for it, as for any image of that size, and finds
 /// a few hundred keypoints (a photograph's thousands would only make the
 /// warm-up longer).
-fn textured(width: u32, height: u32) -> Result<GrayImage, FeatureError> {
+fn textured(width: u32, height: u32) -> Result<Mat, FeatureError> {
     let mut pixels =
         Mat::new_rows_cols_with_default(height as i32, width as i32, CV_8UC1, Scalar::all(0.0))?;
     let grey = |cell: u32, x: u32, y: u32| {
@@ -45,10 +45,7 @@ fn textured(width: u32, height: u32) -> Result<GrayImage, FeatureError> {
         let (x, y) = (i as u32 % width, i as u32 / width);
         *p = (grey(64, x, y) + grey(256, x, y)) as u8;
     }
-    Ok(GrayImage {
-        pixels,
-        size: [width, height],
-    })
+    Ok(pixels)
 }
 
 #[cfg(test)]
@@ -65,7 +62,7 @@ mod tests {
             [image.width(), image.height()],
             [config.max_side, config.max_side * 9 / 16]
         );
-        assert!(super::super::extract(&image, &config).unwrap().len() > 0);
+        assert!(!super::super::extract(&image, &config).unwrap().is_empty());
     }
 
     #[test]
