@@ -179,7 +179,8 @@ impl AppState {
 
     /// Answer a synthetic query on every worker ([`Localizer::warm_up`]),
     /// as `server.warm_up` asks, so that the first requests do not pay for
-    /// what a thread's first extraction maps in and sets up. A failure only costs those requests the time.
+    /// what a thread's first extraction maps in and sets up. A failure only
+    /// costs those requests the time.
     async fn warm_workers(&self, localizer: &Arc<Localizer>) {
         if !self.config.server.warm_up {
             return;
