@@ -12,14 +12,19 @@ use opencv::prelude::*;
 
 /// A synthetic query as JPEG bytes, of a common query's frame size (16:9
 /// at the configured longer side, 640 px when images keep their size; a
-/// larger frame's first request maps only what it needs beyond), for a
-/// thread's first extraction ([`crate::pipeline::Localizer::warm_up`]).
-pub fn warm_up_image(config: &ExtractConfig) -> Result<Vec<u8>, FeatureError> {
+/// larger frame's first request maps only what it needs beyond), made
+/// smaller if need be to hold at most `max_pixels` (the largest a request
+/// may send), for a thread's first extraction
+/// ([`crate::pipeline::Localizer::warm_up`]).
+pub fn warm_up_image(config: &ExtractConfig, max_pixels: u64) -> Result<Vec<u8>, FeatureError> {
     let side = match config.max_side {
         0 => ExtractConfig::default().max_side,
         side => side,
     };
-    let image = textured(side.max(2), (side * 9 / 16).max(2))?;
+    let (w, h) = (f64::from(side), f64::from(side * 9 / 16));
+    let shrink = (max_pixels as f64 / (w * h)).sqrt().min(1.0);
+    let (w, h) = ((w * shrink) as u32, (h * shrink) as u32);
+    let image = textured(w.max(2), h.max(2))?;
     let mut jpeg = Vector::<u8>::new();
     opencv::imgcodecs::imencode(".jpg", &image, &mut jpeg, &Vector::new())?;
     Ok(jpeg.to_vec())
@@ -56,8 +61,9 @@ mod tests {
     #[test]
     fn the_synthetic_query_decodes_to_the_frame_size_and_has_keypoints() {
         let config = ExtractConfig::default();
-        let jpeg = warm_up_image(&config).unwrap();
-        let image = super::super::decode(&jpeg, DecodeLimits::default(), config.max_side).unwrap();
+        let limits = DecodeLimits::default();
+        let jpeg = warm_up_image(&config, limits.max_pixels).unwrap();
+        let image = super::super::decode(&jpeg, limits, config.max_side).unwrap();
         assert_eq!(
             [image.width(), image.height()],
             [config.max_side, config.max_side * 9 / 16]
@@ -71,7 +77,17 @@ mod tests {
             max_side: 3,
             ..ExtractConfig::default()
         };
-        let jpeg = warm_up_image(&config).unwrap();
+        let jpeg = warm_up_image(&config, 1_000_000).unwrap();
         super::super::decode(&jpeg, DecodeLimits::default(), 3).unwrap();
+    }
+
+    #[test]
+    fn the_synthetic_query_fits_the_pixel_limit() {
+        let config = ExtractConfig::default();
+        let limits = DecodeLimits { max_pixels: 10_000 };
+        let jpeg = warm_up_image(&config, limits.max_pixels).unwrap();
+        let image = super::super::decode(&jpeg, limits, config.max_side).unwrap();
+        let pixels = image.width() * image.height();
+        assert!((9_000..=10_000).contains(&pixels), "{pixels} pixels");
     }
 }

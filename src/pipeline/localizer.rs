@@ -409,7 +409,7 @@ impl Localizer {
     /// thread's first extraction. It teaches nothing: neither the learned
     /// plan nor what tiles cost. Returns the features it extracted.
     pub fn warm_up(&self, pairs: bool) -> Result<usize, FeatureError> {
-        let bytes = features::warm_up_image(&self.extract)?;
+        let bytes = features::warm_up_image(&self.extract, self.limits.max_pixels)?;
         let options = SearchOptions {
             spare_core: Some(search::SpareCore::new(move || pairs)),
             ..SearchOptions::default()
