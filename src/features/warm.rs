@@ -33,8 +33,8 @@ pub fn warm_up_image(config: &ExtractConfig, max_pixels: u64) -> Result<Vec<u8>,
 /// A `width` × `height` image of squares of random grey in two sizes (64
 /// and 256 pixels) laid over one another, the same every time: SIFT builds
 /// its whole scale space for it, as for any image of that size, and finds
-/// a few hundred keypoints (a photograph's thousands would only make the
-/// warm-up longer).
+/// some keypoints, far fewer than a photograph's thousands (which would
+/// only make the warm-up longer).
 fn textured(width: u32, height: u32) -> Result<Mat, FeatureError> {
     let mut pixels =
         Mat::new_rows_cols_with_default(height as i32, width as i32, CV_8UC1, Scalar::all(0.0))?;

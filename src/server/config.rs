@@ -179,9 +179,9 @@ pub struct ServerConfig {
     /// While a core would idle, a streamed query extracts its next tile
     /// together with the one after it, on that core.
     pub tiles_ahead: bool,
-    /// Before the service is ready, each worker extracts a synthetic image,
-    /// so that the first requests do not pay for a thread's first
-    /// extraction.
+    /// Before the service is ready, each worker answers a synthetic query
+    /// ([`crate::pipeline::Localizer::warm_up`]), so that the first requests
+    /// do not pay for a thread's first extraction.
     pub warm_up: bool,
     pub log_format: LogFormat,
     /// Connections open at once; beyond, new ones wait in the listen backlog.
