@@ -8,7 +8,7 @@ use bowloc::dataset::Dataset;
 use bowloc::features::{DecodeLimits, ExtractConfig};
 use bowloc::pipeline::Localizer;
 use bowloc::search::{RuleSpec, SearchOptions};
-use std::process::Command;
+use std::process::{Command, Output, Stdio};
 
 fn bowloc() -> Command {
     Command::new(env!("CARGO_BIN_EXE_bowloc"))
@@ -50,6 +50,18 @@ fn rtabmap_loop_recall_at_5_with_full_bow() {
         recall >= RECALL_AT_5_FLOOR,
         "recall@5 {recall:.3} below {RECALL_AT_5_FLOOR}"
     );
+}
+
+/// Runs `cmd` with its standard output's reader gone before it writes a
+/// byte, as `bowloc … | head` leaves it once `head` has its lines.
+fn printing_to_a_closed_pipe(cmd: &mut Command) -> Output {
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    child.wait_with_output().unwrap()
 }
 
 /// Runs the CLI and returns (success, stderr).
@@ -335,6 +347,18 @@ fn cli_reports_bad_input_clearly() {
     for good in [&answers[0], &answers[2]] {
         assert!(good.get("error").is_none(), "{good}");
         assert!(!good["candidates"].as_array().unwrap().is_empty(), "{good}");
+    }
+
+    // a reader that stops reading ends the output quietly, never a panic
+    let vocab_and_map = ["--vocab", &p("v.bowvoc"), "--map", &p("m.bowmap")];
+    for out in [
+        printing_to_a_closed_pipe(bowloc().arg("query").args(vocab_and_map).arg(&query)),
+        printing_to_a_closed_pipe(bowloc().args(["map", "list", "--map", &p("m.bowmap")])),
+        printing_to_a_closed_pipe(bowloc().arg("rules")),
+        printing_to_a_closed_pipe(bowloc().arg("openapi")),
+    ] {
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success() && !err.contains("panicked"), "{err}");
     }
 }
 

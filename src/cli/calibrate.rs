@@ -162,7 +162,7 @@ pub fn run(a: CalibrateArgs) -> anyhow::Result<()> {
             }
         }
     }
-    println!("{table}");
+    outln!("{table}")?;
 
     let chosen: Vec<(Calibrated, Option<Transfer>)> = results
         .into_iter()

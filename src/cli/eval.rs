@@ -160,7 +160,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         "evaluation written"
     );
     if let Some(r) = &report.recommendation {
-        println!(
+        outln!(
             "recommended: {} ({:.1} % of features, worst seed {:.1} %; recall top-5 @90%P {:.1} % vs {:.1} %, recall@1 {:.1} % vs {:.1} %, means over seeds)",
             r.label,
             100.0 * r.fraction,
@@ -169,7 +169,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
             100.0 * r.baseline_recall90_top5,
             100.0 * r.recall_at_1,
             100.0 * r.baseline_recall_at_1
-        );
+        )?;
     }
     let degenerate = report
         .settings
@@ -177,17 +177,17 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         .filter(|s| s.setting.degenerate.is_some())
         .count();
     if degenerate > 0 {
-        println!(
+        outln!(
             "{degenerate} degenerate grid points (target out of reach or warm-up too long), \
              marked † in results.md and left out of the equal-recall tables and the recommendation"
-        );
+        )?;
     }
     if let Some(why) = &report.no_recommendation {
-        println!("no recommendation: {why}");
+        outln!("no recommendation: {why}")?;
     }
     if let Some(v) = &report.verification {
         for r in &v.rows {
-            println!(
+            outln!(
                 "{}: recall@1 {:.1} % → {:.1} % with verification, recall@5 {:.1} % → {:.1} %, recall top-1 @90%P {:.1} % → {:.1} %, recall top-5 @90%P {:.1} % → {:.1} %, verification {:.2} ms per query (median)",
                 r.label,
                 100.0 * r.without.recall_at_1.mean,
@@ -199,12 +199,12 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
                 100.0 * r.without.recall90_top5.mean,
                 100.0 * r.with.recall90_top5.mean,
                 r.verify_ms.median,
-            );
+            )?;
         }
     }
     for r in &report.plan_orders {
         let [lo, _, hi] = r.spread(|o| r.ratio(o));
-        println!(
+        outln!(
             "{}, vocabulary seed {}, {} servers: {} of {} query orders settled on the coarse pass; \
              median request {lo:.3} to {hi:.3} of the whole-image full search's",
             r.label,
@@ -212,9 +212,9 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
             r.start.name(),
             r.settled_coarse(),
             r.orders.len(),
-        );
+        )?;
     }
-    println!("{}", config.out.join("results.md").display());
+    outln!("{}", config.out.join("results.md").display())?;
     Ok(())
 }
 
@@ -260,8 +260,8 @@ fn sequence(a: EvalArgs, name: String, seeds: Vec<u64>) -> anyhow::Result<()> {
         dataset: a.dataset,
     };
     let report = eval::sequence::run(&config)?;
-    print!("{}", eval::sequence::markdown(&report));
-    println!("{}", config.out.join("sequence.md").display());
+    out!("{}", eval::sequence::markdown(&report))?;
+    outln!("{}", config.out.join("sequence.md").display())?;
     Ok(())
 }
 

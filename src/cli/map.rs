@@ -13,7 +13,6 @@ use bowloc::pipeline::build_map;
 use bowloc::server::images::{ImageItem, check_id};
 use bowloc::vocabulary::Vocabulary;
 use clap::{Args, Subcommand};
-use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Subcommand)]
@@ -89,7 +88,12 @@ fn pose_values(given: &[String], fields: &[String]) -> anyhow::Result<Vec<f64>> 
     pose_row(fields, pairs).map_err(|e| anyhow::anyhow!("--pose {}: {e}", e.field()))
 }
 
-fn print_change(id: &str, applied: Applied, generation: u64, features: Option<usize>) {
+fn print_change(
+    id: &str,
+    applied: Applied,
+    generation: u64,
+    features: Option<usize>,
+) -> std::io::Result<()> {
     let line = serde_json::json!({
         "id": id,
         "index": applied.id,
@@ -97,7 +101,7 @@ fn print_change(id: &str, applied: Applied, generation: u64, features: Option<us
         "replaced": applied.replaced,
         "features": features,
     });
-    println!("{line}");
+    outln!("{line}")
 }
 
 #[derive(Args)]
@@ -154,29 +158,28 @@ pub fn run(command: MapCommand) -> anyhow::Result<()> {
                 features,
                 added_at_ms: now_ms(),
             }))?;
-            print_change(&id, applied, generation, Some(n));
+            print_change(&id, applied, generation, Some(n))?;
             Ok(())
         }
         MapCommand::Remove(a) => {
             let live = open_live(&a.map)?;
             let (applied, generation) = live.apply(Change::Remove { name: a.id.clone() })?;
-            print_change(&a.id, applied, generation, None);
+            print_change(&a.id, applied, generation, None)?;
             Ok(())
         }
         MapCommand::List(a) => {
             let live = open_live(&a.map)?;
             let s = live.snapshot();
-            let mut out = std::io::stdout().lock();
             for j in s.ids() {
                 let item = ImageItem::of(&s, j);
-                writeln!(out, "{}", serde_json::to_string(&item)?)?;
+                outln!("{}", serde_json::to_string(&item)?)?;
             }
             Ok(())
         }
         MapCommand::Compact(a) => {
             let live = open_live(&a.map)?;
             match live.compact()? {
-                Some(c) => println!("{}", serde_json::to_string(&c)?),
+                Some(c) => outln!("{}", serde_json::to_string(&c)?)?,
                 None => tracing::info!("no changes to fold"),
             }
             Ok(())

@@ -1,5 +1,8 @@
 //! Command-line front end: argument parsing and one module per subcommand.
 
+#[macro_use]
+mod out;
+
 mod args;
 mod calibrate;
 mod eval;
@@ -133,8 +136,7 @@ pub fn run() -> ExitCode {
                 Command::Calibrate(a) => calibrate::run(a),
                 Command::Openapi => serve::print_openapi(),
                 Command::Rules => {
-                    print!("{}", bowloc::search::stop::rules_markdown());
-                    Ok(())
+                    out!("{}", bowloc::search::stop::rules_markdown()).map_err(Into::into)
                 }
                 Command::Healthcheck(a) => healthcheck::run(a),
                 Command::Serve(_) => unreachable!("handled above"),
@@ -143,6 +145,8 @@ pub fn run() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        // `bowloc … | head`: the reader has what it wanted
+        Err(e) if out::reader_gone(&e) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE

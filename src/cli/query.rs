@@ -88,7 +88,7 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
         value["query"] = query;
         answers.push(value);
     }
-    println!("{}", serde_json::to_string_pretty(&answers)?);
+    outln!("{}", serde_json::to_string_pretty(&answers)?)?;
     if failed > 0 {
         anyhow::bail!(
             "{failed} of {} images could not be localized (their answers hold the error)",

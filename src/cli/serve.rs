@@ -56,6 +56,6 @@ pub fn run(config: Config) -> anyhow::Result<()> {
 
 /// `bowloc openapi`: print the API document (kept in docs/openapi.json).
 pub fn print_openapi() -> anyhow::Result<()> {
-    print!("{}", bowloc::server::openapi::json());
+    out!("{}", bowloc::server::openapi::json())?;
     Ok(())
 }

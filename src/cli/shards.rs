@@ -62,13 +62,13 @@ pub fn run(a: ShardsArgs) -> anyhow::Result<()> {
         dataset: a.dataset,
     };
     let rows = shards::run(&config)?;
-    print!("{}", shards::markdown(&rows));
+    out!("{}", shards::markdown(&rows))?;
     if let Some(path) = &a.json {
         std::fs::write(path, serde_json::to_string_pretty(&rows)?)?;
     }
     let differ: usize = rows.iter().map(|r| r.searches - r.identical).sum();
     let searches: usize = rows.iter().map(|r| r.searches).sum();
-    println!("{name}: {differ} of {searches} sharded searches differ from one machine's");
+    outln!("{name}: {differ} of {searches} sharded searches differ from one machine's")?;
     anyhow::ensure!(
         differ == 0,
         "{differ} sharded answers differ from one machine's"
