@@ -275,6 +275,66 @@ async fn the_page_and_its_assets_are_served() {
     }
 }
 
+/// A preflight from a page at `origin` asking to POST an image.
+fn preflight(origin: &str) -> Request<Body> {
+    Request::options("/localize")
+        .header(header::ORIGIN, origin)
+        .header(header::ACCESS_CONTROL_REQUEST_METHOD, "POST")
+        .header(header::ACCESS_CONTROL_REQUEST_HEADERS, "content-type")
+        .body(Body::empty())
+        .unwrap()
+}
+
+#[tokio::test]
+async fn pages_on_the_configured_origins_may_call_the_api_and_no_others() {
+    let allowed = "https://robots.example";
+    let mut config = Config::default();
+    config.server.cors_origins = vec![allowed.into()];
+    let state = state_with(true, config);
+
+    let (status, headers, _) = send(&state, preflight(allowed)).await;
+    assert!(status.is_success(), "{status}");
+    assert_eq!(headers[header::ACCESS_CONTROL_ALLOW_ORIGIN], allowed);
+    let methods = headers[header::ACCESS_CONTROL_ALLOW_METHODS]
+        .to_str()
+        .unwrap();
+    assert!(methods.contains("POST"), "{methods}");
+    let (_, headers, _) = send(&state, preflight("https://elsewhere.example")).await;
+    assert!(!headers.contains_key(header::ACCESS_CONTROL_ALLOW_ORIGIN));
+
+    // the answer itself, and an error, are marked for the page, its
+    // request id readable
+    let mut request = localize("seed=3", "application/json");
+    request
+        .headers_mut()
+        .insert(header::ORIGIN, allowed.parse().unwrap());
+    let (status, headers, _) = send(&state, request).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(headers[header::ACCESS_CONTROL_ALLOW_ORIGIN], allowed);
+    let exposed = headers[header::ACCESS_CONTROL_EXPOSE_HEADERS]
+        .to_str()
+        .unwrap();
+    assert!(exposed.contains("x-request-id"), "{exposed}");
+    let bad = Request::post("/localize?top_n=0")
+        .header(header::ORIGIN, allowed)
+        .body(Body::from("not an image"))
+        .unwrap();
+    let (status, headers, _) = send(&state, bad).await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
+    assert_eq!(headers[header::ACCESS_CONTROL_ALLOW_ORIGIN], allowed);
+
+    // by default no page elsewhere may
+    let state = self::state(true);
+    let (_, headers, _) = send(&state, preflight(allowed)).await;
+    assert!(!headers.contains_key(header::ACCESS_CONTROL_ALLOW_ORIGIN));
+    let mut request = localize("seed=3", "application/json");
+    request
+        .headers_mut()
+        .insert(header::ORIGIN, allowed.parse().unwrap());
+    let (_, headers, _) = send(&state, request).await;
+    assert!(!headers.contains_key(header::ACCESS_CONTROL_ALLOW_ORIGIN));
+}
+
 /// An answer's `tiles` without `saved_ms` (a time), which is checked: some
 /// time when tiles were left, none when every tile was extracted.
 fn tiles_but_time(answer: &serde_json::Value) -> serde_json::Value {

@@ -193,6 +193,9 @@ pub struct ServerConfig {
     pub body_timeout_ms: u64,
     /// After SIGTERM, time requests in flight have to finish.
     pub drain_ms: u64,
+    /// Origins of web pages elsewhere that may call the API from a
+    /// browser ([`super::cors`]); `["*"]` lets every origin in.
+    pub cors_origins: Vec<String>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -321,6 +324,7 @@ impl Default for ServerConfig {
             header_timeout_ms: 10_000,
             body_timeout_ms: 10_000,
             drain_ms: 12_000,
+            cors_origins: Vec::new(),
         }
     }
 }
@@ -627,6 +631,9 @@ impl Config {
                 format!("must be at least 1024, got {}", l.header_bytes),
             );
         }
+        if let Err(e) = super::cors::check(&self.server.cors_origins) {
+            return bad("server.cors_origins", e);
+        }
         if self.server.workers > 4096 {
             return bad(
                 "server.workers",
@@ -766,6 +773,34 @@ mod tests {
     fn shipped_file_equals_the_built_in_defaults() {
         let text = std::fs::read_to_string(shipped()).unwrap();
         assert_eq!(load_str(&text, &[]).unwrap(), Config::default());
+    }
+
+    #[test]
+    fn cors_origins_come_from_the_file_or_the_environment_and_are_checked() {
+        let c = load_str(
+            "[server]\ncors_origins = [\"https://robots.example\"]\n",
+            &[],
+        )
+        .unwrap();
+        assert_eq!(c.server.cors_origins, ["https://robots.example"]);
+        let env = [(
+            "BOWLOC_SERVER__CORS_ORIGINS",
+            "[\"http://10.0.0.7:3000\", \"https://robots.example\"]",
+        )];
+        let c = load_str("", &env).unwrap();
+        assert_eq!(
+            c.server.cors_origins,
+            ["http://10.0.0.7:3000", "https://robots.example"]
+        );
+        let e = load_str(
+            "[server]\ncors_origins = [\"https://robots.example/\"]\n",
+            &[],
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("server.cors_origins") && e.contains("no path"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -6,6 +6,7 @@
 //! refused, requests in flight finish, and [`run`] returns.
 //!
 //! - [`config`]: configuration (file, environment, flags) and its checks;
+//! - [`cors`]: which pages on other origins may call the API;
 //! - [`connections`]: accepting and serving connections (cap, timeouts,
 //!   drain), and what the HTTP layer answers by itself;
 //! - [`bootstrap`]: building a missing default map, then loading;
@@ -32,6 +33,7 @@ pub mod body;
 pub mod bootstrap;
 pub mod config;
 pub mod connections;
+pub mod cors;
 pub mod errors;
 pub mod images;
 pub mod localize;
@@ -369,6 +371,7 @@ pub fn router(state: Arc<AppState>) -> Router {
                 .layer(PropagateRequestIdLayer::new(middleware::REQUEST_ID))
                 .layer(axum::middleware::from_fn(middleware::observe))
                 .layer(CatchPanicLayer::custom(middleware::panic_response))
+                .option_layer(cors::layer(&state.config.server.cors_origins))
                 .layer(axum::middleware::from_fn_with_state(
                     header_limits,
                     middleware::header_limits,
