@@ -349,6 +349,37 @@ fn cli_reports_bad_input_clearly() {
         assert!(!good["candidates"].as_array().unwrap().is_empty(), "{good}");
     }
 
+    // a folder stands for its images, in name order; --jsonl prints an
+    // answer a line as each is answered
+    let frames = d.join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    std::fs::copy(&query, frames.join("2.jpg")).unwrap();
+    std::fs::copy(&junk, frames.join("10.jpg")).unwrap();
+    std::fs::write(frames.join("notes.txt"), "not an image").unwrap();
+    let out = bowloc()
+        .args([
+            "query",
+            "--vocab",
+            &p("v.bowvoc"),
+            "--map",
+            &p("m.bowmap"),
+            "--jsonl",
+        ])
+        .arg(&frames)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let lines: Vec<serde_json::Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 2, "{lines:?}");
+    assert!(lines[0]["query"].as_str().unwrap().ends_with("2.jpg"));
+    assert!(!lines[0]["candidates"].as_array().unwrap().is_empty());
+    assert!(lines[1]["query"].as_str().unwrap().ends_with("10.jpg"));
+    assert!(lines[1]["error"].is_string());
+
     // a reader that stops reading ends the output quietly, never a panic
     let vocab_and_map = ["--vocab", &p("v.bowvoc"), "--map", &p("m.bowmap")];
     for out in [

@@ -14,11 +14,17 @@ use std::sync::Arc;
 pub struct QueryArgs {
     #[command(flatten)]
     files: MapFiles,
-    /// Query images. One that cannot be read or decoded gets an answer
-    /// holding its error (and a warning); the others are answered, and the
-    /// command exits with an error at the end.
+    /// Query images, or folders of them (a folder's images in name order,
+    /// numbers by value, as `map build` takes a folder). One that cannot be
+    /// read or decoded gets an answer holding its error (and a warning);
+    /// the others are answered, and the command exits with an error at the
+    /// end.
     #[arg(required = true)]
     images: Vec<PathBuf>,
+    /// Print each answer as one line of JSON as soon as it is answered,
+    /// instead of a JSON array once every image is.
+    #[arg(long)]
+    jsonl: bool,
     #[command(flatten)]
     search: SearchArgs,
     /// Streaming extraction's tile grid, COLSxROWS[+MARGIN][,coarse] (1x1: the
@@ -60,10 +66,11 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
         snapshot.positions(),
     )
     .map_err(anyhow::Error::msg)?;
+    let images = image_files(&a.images)?;
     let mut filter = Filter::new();
-    let mut answers = Vec::with_capacity(a.images.len());
+    let mut answers = Answers::new(a.jsonl);
     let mut failed = 0;
-    for path in &a.images {
+    for path in &images {
         let prediction = a.sequence.then(|| filter.predict(&model, &topology, None));
         let mut frame_options = options.clone();
         frame_options.prior = prediction.as_ref().map(|p| Arc::new(p.prior.clone()));
@@ -74,7 +81,7 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
                 // one bad file does not cost the others their answers
                 tracing::warn!("not localized: {e:#}");
                 failed += 1;
-                answers.push(serde_json::json!({"query": query, "error": format!("{e:#}")}));
+                answers.push(serde_json::json!({"query": query, "error": format!("{e:#}")}))?;
                 continue;
             }
         };
@@ -86,14 +93,60 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
         }
         let mut value = serde_json::to_value(&answer)?;
         value["query"] = query;
-        answers.push(value);
+        answers.push(value)?;
     }
-    outln!("{}", serde_json::to_string_pretty(&answers)?)?;
+    answers.finish()?;
     if failed > 0 {
         anyhow::bail!(
             "{failed} of {} images could not be localized (their answers hold the error)",
-            a.images.len()
+            images.len()
         );
     }
     Ok(())
+}
+
+/// The image files `paths` name: a folder stands for its images.
+fn image_files(paths: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+    let mut files = Vec::with_capacity(paths.len());
+    for path in paths {
+        if path.is_dir() {
+            let images = bowloc::dataset::image_list(path)?;
+            files.extend(images.into_iter().map(|image| image.path));
+        } else {
+            files.push(path.clone());
+        }
+    }
+    Ok(files)
+}
+
+/// Where the answers go: a line each as it comes (`--jsonl`), or an
+/// array at the end.
+enum Answers {
+    Lines,
+    Array(Vec<serde_json::Value>),
+}
+
+impl Answers {
+    fn new(lines: bool) -> Self {
+        if lines {
+            Answers::Lines
+        } else {
+            Answers::Array(Vec::new())
+        }
+    }
+
+    fn push(&mut self, answer: serde_json::Value) -> anyhow::Result<()> {
+        match self {
+            Answers::Lines => outln!("{}", serde_json::to_string(&answer)?)?,
+            Answers::Array(all) => all.push(answer),
+        }
+        Ok(())
+    }
+
+    fn finish(self) -> anyhow::Result<()> {
+        if let Answers::Array(all) = self {
+            outln!("{}", serde_json::to_string_pretty(&all)?)?;
+        }
+        Ok(())
+    }
 }
