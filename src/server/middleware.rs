@@ -13,7 +13,7 @@ use axum::extract::{MatchedPath, Request, State};
 use axum::http::HeaderName;
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 use tracing::Instrument;
 
 pub const REQUEST_ID: HeaderName = HeaderName::from_static("x-request-id");
@@ -52,7 +52,7 @@ pub async fn observe(request: Request, next: Next) -> Response {
     let elapsed = started.elapsed();
     let status = response.status().as_u16();
     metrics::request(&route, method.as_str(), status, elapsed);
-    let latency_ms = elapsed.as_secs_f64() * 1e3;
+    let latency_ms = log_ms(elapsed);
     match response.extensions().get::<LocalizeSummary>() {
         Some(s) => tracing::info!(
             request_id = %id,
@@ -75,6 +75,12 @@ pub async fn observe(request: Request, next: Next) -> Response {
         ),
     }
     response
+}
+
+/// Milliseconds to the microsecond, as the logs give a time (`0.037`, not
+/// `0.036681000000000005`).
+pub fn log_ms(d: Duration) -> f64 {
+    (d.as_secs_f64() * 1e6).round() / 1e3
 }
 
 /// The most header fields, and bytes of header lines, a request may have.
@@ -127,4 +133,16 @@ impl Drop for InFlight {
 pub fn panic_response(payload: Box<dyn std::any::Any + Send + 'static>) -> Response {
     tracing::error!("handler panicked: {}", panic_message(payload.as_ref()));
     ApiError::internal("the request failed unexpectedly").into_response()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::log_ms;
+    use std::time::Duration;
+
+    #[test]
+    fn a_logged_time_reads_to_the_microsecond() {
+        assert_eq!(log_ms(Duration::from_nanos(36_681)).to_string(), "0.037");
+        assert_eq!(log_ms(Duration::from_micros(77_331)).to_string(), "77.331");
+    }
 }

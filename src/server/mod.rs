@@ -207,7 +207,7 @@ impl AppState {
                 localizer.warm_up(pair)
             })
             .await;
-        let ms = started.elapsed().as_secs_f64() * 1e3;
+        let ms = middleware::log_ms(started.elapsed());
         match warmed.iter().find_map(|w| match w {
             Ok(Ok(_)) => None,
             Ok(Err(e)) => Some(e.to_string()),
