@@ -285,6 +285,14 @@ fn preflight(origin: &str) -> Request<Body> {
         .unwrap()
 }
 
+/// A query posted by a page at `origin`.
+fn localize_from(origin: &str) -> Request<Body> {
+    let mut request = localize("seed=3", "application/json");
+    let origin = origin.parse().unwrap();
+    request.headers_mut().insert(header::ORIGIN, origin);
+    request
+}
+
 #[tokio::test]
 async fn pages_on_the_configured_origins_may_call_the_api_and_no_others() {
     let allowed = "https://robots.example";
@@ -304,11 +312,7 @@ async fn pages_on_the_configured_origins_may_call_the_api_and_no_others() {
 
     // the answer itself, and an error, are marked for the page, its
     // request id readable
-    let mut request = localize("seed=3", "application/json");
-    request
-        .headers_mut()
-        .insert(header::ORIGIN, allowed.parse().unwrap());
-    let (status, headers, _) = send(&state, request).await;
+    let (status, headers, _) = send(&state, localize_from(allowed)).await;
     assert_eq!(status, StatusCode::OK);
     assert_eq!(headers[header::ACCESS_CONTROL_ALLOW_ORIGIN], allowed);
     let exposed = headers[header::ACCESS_CONTROL_EXPOSE_HEADERS]
@@ -327,11 +331,7 @@ async fn pages_on_the_configured_origins_may_call_the_api_and_no_others() {
     let state = self::state(true);
     let (_, headers, _) = send(&state, preflight(allowed)).await;
     assert!(!headers.contains_key(header::ACCESS_CONTROL_ALLOW_ORIGIN));
-    let mut request = localize("seed=3", "application/json");
-    request
-        .headers_mut()
-        .insert(header::ORIGIN, allowed.parse().unwrap());
-    let (_, headers, _) = send(&state, request).await;
+    let (_, headers, _) = send(&state, localize_from(allowed)).await;
     assert!(!headers.contains_key(header::ACCESS_CONTROL_ALLOW_ORIGIN));
 }
 
