@@ -125,12 +125,21 @@ pub fn parse_pose_value(v: &str) -> Option<f64> {
     v.trim().parse::<f64>().ok().filter(|x| x.is_finite())
 }
 
+/// The map's pose fields, as an error names them.
+fn pose_fields(known: &[String]) -> String {
+    if known.is_empty() {
+        "it has none: it was built without poses".to_owned()
+    } else {
+        format!("its pose fields: {}", known.join(", "))
+    }
+}
+
 /// Why a pose given field by field was refused; each names its field.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PoseError {
     #[error("given more than once")]
     Repeated { field: String },
-    #[error("not a pose field of the map (its pose fields: [{}])", known.join(", "))]
+    #[error("not a pose field of the map ({})", pose_fields(known))]
     Unknown { field: String, known: Vec<String> },
     #[error("`{value}` is not a finite number")]
     NotFinite { field: String, value: String },
@@ -253,7 +262,9 @@ mod tests {
         assert_eq!(e, PoseError::Repeated { field: "x".into() });
         let e = pose_row(&fields, [("z", "1")]).unwrap_err();
         assert_eq!(e.field(), "z");
-        assert!(e.to_string().contains("[x, y]"), "{e}");
+        assert!(e.to_string().contains("its pose fields: x, y"), "{e}");
+        let e = pose_row(&[], [("x", "1")]).unwrap_err();
+        assert!(e.to_string().contains("built without poses"), "{e}");
         for bad in ["abc", "inf", "NaN", ""] {
             let e = pose_row(&fields, [("x", bad)]).unwrap_err();
             assert!(matches!(e, PoseError::NotFinite { .. }), "{bad}");

@@ -124,8 +124,10 @@ async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiErro
                 }
             };
             let mut image = None;
+            let mut others = Vec::new();
             while let Some(field) = multipart.next_field().await.map_err(multipart_error)? {
                 if field.name() != Some("image") {
+                    others.push(format!("`{}`", field.name().unwrap_or_default()));
                     continue;
                 }
                 if image.is_some() {
@@ -137,13 +139,24 @@ async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiErro
                 image = Some(field.bytes().await.map_err(multipart_error)?);
             }
             image.ok_or_else(|| {
-                ApiError::bad_request(
-                    "missing_image_field",
-                    "the multipart body has no field named `image`",
-                )
+                ApiError::bad_request("missing_image_field", missing_image_field(&others))
             })
         }
     }
+}
+
+/// Why a multipart body with the fields `others` and none named `image` is
+/// refused: the fields it has, so that a client sending its file as `file`
+/// sees what to rename.
+fn missing_image_field(others: &[String]) -> String {
+    let has = match others {
+        [] => "no fields".to_owned(),
+        [one] => format!("only the field {one}"),
+        many => format!("the fields {}", many.join(", ")),
+    };
+    format!(
+        "the multipart body has no field named `image` (it has {has}); send the image as the field `image`"
+    )
 }
 
 /// OpenAPI: the description of an image body, `subject` naming the image.
@@ -198,5 +211,15 @@ mod tests {
             body_kind(&HeaderMap::new()).map_err(|e| e.code),
             Err("unsupported_media_type")
         );
+    }
+
+    #[test]
+    fn a_body_without_the_image_field_is_told_the_fields_it_has() {
+        let with = |fields: &[&str]| {
+            missing_image_field(&fields.iter().map(|f| format!("`{f}`")).collect::<Vec<_>>())
+        };
+        assert!(with(&[]).contains("(it has no fields)"));
+        assert!(with(&["file"]).contains("(it has only the field `file`)"));
+        assert!(with(&["a", "b"]).contains("(it has the fields `a`, `b`)"));
     }
 }
