@@ -275,6 +275,60 @@ async fn the_page_and_its_assets_are_served() {
     }
 }
 
+/// GET `path`, accepting gzip.
+fn get_gzip(path: &str) -> Request<Body> {
+    Request::get(path)
+        .header(header::ACCEPT_ENCODING, "gzip")
+        .body(Body::empty())
+        .unwrap()
+}
+
+#[tokio::test]
+async fn answers_are_gzipped_for_clients_that_accept_it_but_not_jpegs() {
+    let state = state(true);
+    let plain = send(
+        &state,
+        Request::get("/openapi.json").body(Body::empty()).unwrap(),
+    )
+    .await;
+    assert!(!plain.1.contains_key(header::CONTENT_ENCODING));
+    let (status, headers, gzipped) = send(&state, get_gzip("/openapi.json")).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(headers[header::CONTENT_ENCODING], "gzip");
+    assert!(
+        gzipped.len() * 4 < plain.2.len(),
+        "{} of {} bytes",
+        gzipped.len(),
+        plain.2.len()
+    );
+    let mut unzipped = Vec::new();
+    std::io::Read::read_to_end(
+        &mut flate2::read::GzDecoder::new(&gzipped[..]),
+        &mut unzipped,
+    )
+    .unwrap();
+    assert_eq!(unzipped, plain.2);
+
+    let mut query = localize("seed=3&trace=full", "application/json");
+    query
+        .headers_mut()
+        .insert(header::ACCEPT_ENCODING, "gzip".parse().unwrap());
+    let (status, headers, _) = send(&state, query).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(headers[header::CONTENT_ENCODING], "gzip");
+
+    let (status, headers, _) = send(&state, get_gzip("/images/0/thumbnail")).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(headers[header::CONTENT_TYPE], "image/jpeg");
+    assert!(!headers.contains_key(header::CONTENT_ENCODING));
+
+    let mut config = Config::default();
+    config.server.compression = false;
+    let state = state_with(true, config);
+    let (_, headers, _) = send(&state, get_gzip("/openapi.json")).await;
+    assert!(!headers.contains_key(header::CONTENT_ENCODING));
+}
+
 /// A preflight from a page at `origin` asking to POST an image.
 fn preflight(origin: &str) -> Request<Body> {
     Request::options("/localize")

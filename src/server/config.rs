@@ -196,6 +196,9 @@ pub struct ServerConfig {
     /// Origins of web pages elsewhere that may call the API from a
     /// browser ([`super::cors`]); `["*"]` lets every origin in.
     pub cors_origins: Vec<String>,
+    /// Answers gzip-compressed for clients that accept it (JSON, protobuf,
+    /// the metrics and the page; never the JPEG thumbnails).
+    pub compression: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -325,6 +328,7 @@ impl Default for ServerConfig {
             body_timeout_ms: 10_000,
             drain_ms: 12_000,
             cors_origins: Vec::new(),
+            compression: true,
         }
     }
 }

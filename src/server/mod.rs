@@ -64,6 +64,7 @@ use std::time::Duration;
 use tokio::net::TcpListener;
 use tower::ServiceBuilder;
 use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::compression::CompressionLayer;
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::timeout::RequestBodyTimeoutLayer;
 use workers::WorkerPool;
@@ -323,6 +324,18 @@ impl AppState {
 
 /// Every route with its layers.
 pub fn router(state: Arc<AppState>) -> Router {
+    let compression = state.config.server.compression;
+    let routes = routes(state);
+    // outermost: what every layer inside answered, compressed
+    if compression {
+        routes.layer(CompressionLayer::new())
+    } else {
+        routes
+    }
+}
+
+/// Every route with its layers but compression.
+fn routes(state: Arc<AppState>) -> Router {
     let body_limit = state.config.limits.body_bytes;
     let body_timeout = Duration::from_millis(state.config.server.body_timeout_ms);
     let header_limits = middleware::HeaderLimits {
