@@ -230,7 +230,7 @@ mod tests {
         assert!(pose_values(&[], &fields).unwrap().is_empty());
         for (bad, says) in [
             (&["x"][..], "FIELD=VALUE"),
-            (&["z=1"], "[x, y]"),
+            (&["z=1"], "its pose fields: x, y"),
             (&["x=1", "x=2"], "more than once"),
             (&["x=inf"], "finite"),
         ] {
