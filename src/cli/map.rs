@@ -93,7 +93,7 @@ fn print_change(
     applied: Applied,
     generation: u64,
     features: Option<usize>,
-) -> std::io::Result<()> {
+) -> anyhow::Result<()> {
     let line = serde_json::json!({
         "id": id,
         "index": applied.id,

@@ -136,7 +136,7 @@ pub fn run() -> ExitCode {
                 Command::Calibrate(a) => calibrate::run(a),
                 Command::Openapi => serve::print_openapi(),
                 Command::Rules => {
-                    out!("{}", bowloc::search::stop::rules_markdown()).map_err(Into::into)
+                    out!("{}", bowloc::search::stop::rules_markdown())
                 }
                 Command::Healthcheck(a) => healthcheck::run(a),
                 Command::Serve(_) => unreachable!("handled above"),
