@@ -124,10 +124,10 @@ async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiErro
                 }
             };
             let mut image = None;
-            let mut others = Vec::new();
+            let mut others = OtherFields::default();
             while let Some(field) = multipart.next_field().await.map_err(multipart_error)? {
                 if field.name() != Some("image") {
-                    others.push(format!("`{}`", field.name().unwrap_or_default()));
+                    others.add(field.name().unwrap_or_default());
                     continue;
                 }
                 if image.is_some() {
@@ -138,25 +138,52 @@ async fn read_image(state: &AppState, request: Request) -> Result<Bytes, ApiErro
                 }
                 image = Some(field.bytes().await.map_err(multipart_error)?);
             }
-            image.ok_or_else(|| {
-                ApiError::bad_request("missing_image_field", missing_image_field(&others))
-            })
+            image
+                .ok_or_else(|| ApiError::bad_request("missing_image_field", others.missing_image()))
         }
     }
 }
 
-/// Why a multipart body with the fields `others` and none named `image` is
-/// refused: the fields it has, so that a client sending its file as `file`
-/// sees what to rename.
-fn missing_image_field(others: &[String]) -> String {
-    let has = match others {
-        [] => "no fields".to_owned(),
-        [one] => format!("only the field {one}"),
-        many => format!("the fields {}", many.join(", ")),
-    };
-    format!(
-        "the multipart body has no field named `image` (it has {has}); send the image as the field `image`"
-    )
+/// The fields of a multipart body other than `image`, as its error names
+/// them: the first few, each cut short, and how many more (a body holds as
+/// many as its size allows, and the error must stay small).
+#[derive(Default)]
+struct OtherFields {
+    named: Vec<String>,
+    more: usize,
+}
+
+impl OtherFields {
+    /// Fields named in full; beyond, only counted.
+    const NAMED: usize = 4;
+    /// Characters of a field's name shown.
+    const NAME_CHARS: usize = 40;
+
+    fn add(&mut self, name: &str) {
+        if self.named.len() < Self::NAMED {
+            self.named
+                .push(name.chars().take(Self::NAME_CHARS).collect());
+        } else {
+            self.more += 1;
+        }
+    }
+
+    /// Why the body is refused: the fields it has, so that a client
+    /// sending its file as `file` sees what to rename.
+    fn missing_image(&self) -> String {
+        let names: Vec<String> = self.named.iter().map(|n| format!("`{n}`")).collect();
+        let mut has = match &names[..] {
+            [] => "no fields".to_owned(),
+            [one] => format!("only the field {one}"),
+            many => format!("the fields {}", many.join(", ")),
+        };
+        if self.more > 0 {
+            has += &format!(" and {} more", self.more);
+        }
+        format!(
+            "the multipart body has no field named `image` (it has {has}); send the image as the field `image`"
+        )
+    }
 }
 
 /// OpenAPI: the description of an image body, `subject` naming the image.
@@ -216,10 +243,18 @@ mod tests {
     #[test]
     fn a_body_without_the_image_field_is_told_the_fields_it_has() {
         let with = |fields: &[&str]| {
-            missing_image_field(&fields.iter().map(|f| format!("`{f}`")).collect::<Vec<_>>())
+            let mut others = OtherFields::default();
+            fields.iter().for_each(|f| others.add(f));
+            others.missing_image()
         };
         assert!(with(&[]).contains("(it has no fields)"));
         assert!(with(&["file"]).contains("(it has only the field `file`)"));
         assert!(with(&["a", "b"]).contains("(it has the fields `a`, `b`)"));
+        // a body of many fields, or of long names, gets a short error
+        let long = "x".repeat(10_000);
+        let many = vec![long.as_str(); 100_000];
+        let e = with(&many);
+        assert!(e.len() < 400, "{} bytes", e.len());
+        assert!(e.contains("and 99996 more"), "{e}");
     }
 }
