@@ -295,13 +295,12 @@ fn cli_reports_bad_input_clearly() {
     );
 
     // and the good pair answers with JSON
+    let (vocab, map) = (p("v.bowvoc"), p("m.bowmap"));
+    let on_map = ["--vocab", vocab.as_str(), "--map", map.as_str()];
     let out = bowloc()
+        .arg("query")
+        .args(on_map)
         .args([
-            "query",
-            "--vocab",
-            &p("v.bowvoc"),
-            "--map",
-            &p("m.bowmap"),
             &query,
             "--rule",
             "fixed",
@@ -325,7 +324,8 @@ fn cli_reports_bad_input_clearly() {
     // are answered, and the command fails at the end
     let junk = p("junk.jpg");
     let out = bowloc()
-        .args(["query", "--vocab", &p("v.bowvoc"), "--map", &p("m.bowmap")])
+        .arg("query")
+        .args(on_map)
         .args([&query, &junk, &query])
         .output()
         .unwrap();
@@ -357,14 +357,9 @@ fn cli_reports_bad_input_clearly() {
     std::fs::copy(&junk, frames.join("10.jpg")).unwrap();
     std::fs::write(frames.join("notes.txt"), "not an image").unwrap();
     let out = bowloc()
-        .args([
-            "query",
-            "--vocab",
-            &p("v.bowvoc"),
-            "--map",
-            &p("m.bowmap"),
-            "--jsonl",
-        ])
+        .arg("query")
+        .args(on_map)
+        .arg("--jsonl")
         .arg(&frames)
         .output()
         .unwrap();
@@ -381,10 +376,9 @@ fn cli_reports_bad_input_clearly() {
     assert!(lines[1]["error"].is_string());
 
     // a reader that stops reading ends the output quietly, never a panic
-    let vocab_and_map = ["--vocab", &p("v.bowvoc"), "--map", &p("m.bowmap")];
     for out in [
-        printing_to_a_closed_pipe(bowloc().arg("query").args(vocab_and_map).arg(&query)),
-        printing_to_a_closed_pipe(bowloc().args(["map", "list", "--map", &p("m.bowmap")])),
+        printing_to_a_closed_pipe(bowloc().arg("query").args(on_map).arg(&query)),
+        printing_to_a_closed_pipe(bowloc().args(["map", "list", "--map", &map])),
         printing_to_a_closed_pipe(bowloc().arg("rules")),
         printing_to_a_closed_pipe(bowloc().arg("openapi")),
     ] {
