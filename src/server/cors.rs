@@ -4,12 +4,26 @@
 //! by the service itself and needs none.
 
 use super::middleware::REQUEST_ID;
-use axum::http::{HeaderValue, Method, Uri, header};
+use axum::http::{HeaderName, HeaderValue, Method, Uri, header};
 use std::time::Duration;
 use tower_http::cors::{AllowOrigin, CorsLayer};
 
 /// The configured value that lets every origin in.
 pub const ANY: &str = "*";
+
+/// What a page elsewhere may ask for (docs/service.md, "Pages elsewhere",
+/// lists them; a test holds it to these).
+pub const METHODS: [Method; 4] = [Method::GET, Method::POST, Method::PUT, Method::DELETE];
+/// The request headers a page elsewhere may send.
+pub const REQUEST_HEADERS: [HeaderName; 4] = [
+    header::CONTENT_TYPE,
+    header::ACCEPT,
+    header::AUTHORIZATION,
+    REQUEST_ID,
+];
+/// The answer's headers a page elsewhere may read.
+pub const READABLE_HEADERS: [HeaderName; 3] =
+    [REQUEST_ID, header::RETRY_AFTER, header::WWW_AUTHENTICATE];
 
 /// How long a browser may keep a preflight's answer.
 const PREFLIGHT_MAX_AGE: Duration = Duration::from_secs(600);
@@ -74,21 +88,52 @@ pub fn layer(origins: &[String]) -> Option<CorsLayer> {
     Some(
         CorsLayer::new()
             .allow_origin(allow)
-            .allow_methods([Method::GET, Method::POST, Method::PUT, Method::DELETE])
-            .allow_headers([
-                header::CONTENT_TYPE,
-                header::ACCEPT,
-                header::AUTHORIZATION,
-                REQUEST_ID,
-            ])
-            .expose_headers([REQUEST_ID, header::RETRY_AFTER, header::WWW_AUTHENTICATE])
+            .allow_methods(METHODS)
+            .allow_headers(REQUEST_HEADERS)
+            .expose_headers(READABLE_HEADERS)
             .max_age(PREFLIGHT_MAX_AGE),
     )
 }
 
 #[cfg(test)]
 mod tests {
-    use super::check;
+    use super::*;
+
+    #[test]
+    fn the_service_docs_list_what_pages_elsewhere_may_send_and_read() {
+        let docs = include_str!("../../docs/service.md").to_lowercase();
+        let section = &docs[docs.find("**pages elsewhere.**").unwrap()..];
+        let section = section[..section.find("```").unwrap()]
+            .split_whitespace()
+            .collect::<Vec<_>>()
+            .join(" ");
+        let methods: Vec<String> = METHODS.iter().map(|m| m.as_str().to_lowercase()).collect();
+        let headers = |names: &[HeaderName]| -> Vec<String> {
+            names.iter().map(|h| format!("`{}`", h.as_str())).collect()
+        };
+        for listed in [
+            format!(
+                "{} with {}",
+                english(&methods),
+                english(&headers(&REQUEST_HEADERS))
+            ),
+            format!("may read {}", english(&headers(&READABLE_HEADERS))),
+        ] {
+            assert!(
+                section.contains(&listed),
+                "docs/service.md does not say: {listed}"
+            );
+        }
+    }
+
+    /// `a, b and c`.
+    fn english(items: &[String]) -> String {
+        match items {
+            [] => String::new(),
+            [one] => one.clone(),
+            [rest @ .., last] => format!("{} and {last}", rest.join(", ")),
+        }
+    }
 
     fn origins(list: &[&str]) -> Vec<String> {
         list.iter().map(|s| s.to_string()).collect()
