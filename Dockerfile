@@ -2,7 +2,8 @@
 # run on bookworm-slim with only the OpenCV runtime libraries the binary
 # links (scripts/check-docker-runtime.sh checks this list against `ldd`).
 #
-#   docker build -t bowloc .
+#   docker build -t bowloc .      (podman: podman build --format docker -t bowloc .,
+#                                  or the OCI format drops the HEALTHCHECK)
 #   docker run -p 8080:8080 -v /path/to/maps:/data bowloc \
 #     serve --vocab /data/vocab.bowvoc --map /data/map.bowmap
 #

@@ -6,7 +6,9 @@
 #      /data/default, becomes ready, answers a query; the image's own
 #      HEALTHCHECK command passes; it runs as its own user; SIGTERM (`stop`)
 #      ends it with exit status 0;
-#   2. as deploy/kubernetes/base runs it: the ConfigMap's configuration
+#   2. as the header's other example says: the map mounted at /data and
+#      named by flags, no configuration file: ready, a query answered;
+#   3. as deploy/kubernetes/base runs it: the ConfigMap's configuration
 #      mounted read-only at /etc/bowloc, the map (the one step 1 built)
 #      read-only at /maps, a read-only root filesystem, every capability
 #      dropped, no privilege escalation, user and group 10001: ready, a
@@ -128,26 +130,37 @@ healthcheck=$("$engine" inspect -f '{{json .Config.Healthcheck}}' "$IMAGE" 2>/de
   healthcheck=$("$engine" inspect -f '{{json .HealthCheck}}' "$IMAGE" 2>/dev/null)
 check "the image declares its HEALTHCHECK ($healthcheck)" grep -q 'healthcheck' <<<"$healthcheck"
 
+run_ready() { # run_ready NAME SECONDS WHAT RUN-ARGUMENTS…: run detached,
+  # published on a free loopback port (sets ctr and port), wait for /readyz
+  local name=$1 seconds=$2 what=$3 start
+  shift 3
+  port=$(free_port)
+  ctr=bowloc-check-$name-$$
+  containers+=("$ctr")
+  start=$(date +%s)
+  "$engine" run -d --name "$ctr" -p "127.0.0.1:$port:8080" "$@" >/dev/null 2>>"$tmp/engine.log"
+  if wait_ready "$port" "$ctr" "$seconds"; then
+    ok "$what ($(($(date +%s) - start)) s)"
+  else
+    "$engine" logs "$ctr" 2>&1 | tail -20
+    tail -5 "$tmp/engine.log"
+    fail "$what"
+    return 1
+  fi
+}
+
+answers_query() {
+  if localize "$port"; then
+    ok "answers a query (top candidate $(jq -r '.candidates[0].name' "$tmp/answer.json"))"
+  else
+    fail "a query: $(cat "$tmp/status") $(head -c 300 "$tmp/answer.json")"
+  fi
+}
+
 # 1. The Dockerfile's own example: bootstrap from a mounted dataset.
-port=$(free_port)
-ctr=bowloc-check-bootstrap-$$
-containers+=("$ctr")
-"$engine" run -d --name "$ctr" -p "127.0.0.1:$port:8080" \
-  -v "$DATASET:/datasets/gardens-point:ro" "$IMAGE" >/dev/null 2>>"$tmp/engine.log"
-start=$(date +%s)
-if wait_ready "$port" "$ctr" 600; then
-  ok "bootstrapped the default map from the mounted dataset and became ready ($(($(date +%s) - start)) s)"
-else
-  "$engine" logs "$ctr" 2>&1 | tail -20
-  tail -5 "$tmp/engine.log"
-  fail "bootstrap from the mounted dataset"
-  exit 1
-fi
-if localize "$port"; then
-  ok "answers a query (top candidate $(jq -r '.candidates[0].name' "$tmp/answer.json"))"
-else
-  fail "a query: $(cat "$tmp/status") $(head -c 300 "$tmp/answer.json")"
-fi
+run_ready bootstrap 600 "bootstrapped the default map from the mounted dataset and became ready" \
+  -v "$DATASET:/datasets/gardens-point:ro" "$IMAGE" || exit 1
+answers_query
 check "the HEALTHCHECK command passes inside the container" \
   "$engine" exec "$ctr" bowloc healthcheck --address 127.0.0.1:8080 --path /readyz
 uid=$("$engine" exec "$ctr" id -u)
@@ -157,7 +170,16 @@ check "runs as its own user (uid $uid)" test "$uid" = 10001
 check "the bootstrapped files are in /data/default" test -s "$tmp/map.bowmap"
 check "SIGTERM ends it with exit status 0" stop_cleanly "$ctr"
 
-# 2. As deploy/kubernetes/base runs it.
+# 2. The Dockerfile header's other example: the map mounted at /data, no
+# configuration file named.
+chmod -R a+rX "$tmp"
+if run_ready mounted 120 "ready with the map mounted at /data and named by flags" \
+  -v "$tmp:/data:ro" "$IMAGE" serve --vocab /data/vocab.bowvoc --map /data/map.bowmap; then
+  answers_query
+  check "SIGTERM ends it with exit status 0" stop_cleanly "$ctr"
+fi
+
+# 3. As deploy/kubernetes/base runs it.
 mkdir -p "$tmp/etc" "$tmp/maps"
 mv "$tmp/vocab.bowvoc" "$tmp/map.bowmap" "$tmp/maps/"
 chmod -R a+rX "$tmp"
@@ -165,24 +187,15 @@ chmod -R a+rX "$tmp"
 awk '/config.toml: \|/ {on = 1; next} on && /^[^ ]/ {on = 0} on {sub(/^    /, ""); print}' \
   deploy/kubernetes/base/configmap.yaml >"$tmp/etc/config.toml"
 check "read the ConfigMap's configuration ($(wc -l <"$tmp/etc/config.toml") lines)" grep -q '^\[files\]' "$tmp/etc/config.toml"
-port=$(free_port)
-ctr=bowloc-check-kubernetes-$$
-containers+=("$ctr")
-"$engine" run -d --name "$ctr" -p "127.0.0.1:$port:8080" \
+if run_ready kubernetes 120 "ready with a read-only root filesystem, no capabilities, the map read-only at /maps" \
   --read-only --cap-drop ALL --security-opt no-new-privileges --user 10001:10001 \
   -v "$tmp/etc:/etc/bowloc:ro" -v "$tmp/maps:/maps:ro" \
-  "$IMAGE" serve --config /etc/bowloc/config.toml >/dev/null 2>>"$tmp/engine.log"
-if wait_ready "$port" "$ctr" 120; then
-  ok "ready with a read-only root filesystem, no capabilities, the map read-only at /maps"
-else
-  "$engine" logs "$ctr" 2>&1 | tail -20
-  tail -5 "$tmp/engine.log"
-  fail "start as deploy/kubernetes/base runs it"
+  "$IMAGE" serve --config /etc/bowloc/config.toml; then
+  answers_query
+  check "SIGTERM ends it with exit status 0" stop_cleanly "$ctr"
+  "$engine" logs "$ctr" >"$tmp/kubernetes.log" 2>&1
+  warnings=$(grep -E '"level":"(WARN|ERROR)"' "$tmp/kubernetes.log" | head -5)
+  check "no warning or error in its log${warnings:+: $warnings}" test -z "$warnings"
 fi
-check "answers a query" localize "$port"
-check "SIGTERM ends it with exit status 0" stop_cleanly "$ctr"
-"$engine" logs "$ctr" >"$tmp/kubernetes.log" 2>&1
-warnings=$(grep -E '"level":"(WARN|ERROR)"' "$tmp/kubernetes.log" | head -5)
-check "no warning or error in its log${warnings:+: $warnings}" test -z "$warnings"
 
 exit "$failed"

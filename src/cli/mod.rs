@@ -100,7 +100,7 @@ pub fn run() -> ExitCode {
         );
     }
     let result = match cli.command {
-        Command::Serve(a) => serve::config(&a).and_then(|config| {
+        Command::Serve(a) => serve::config(&a).and_then(|(config, source)| {
             let format = config.server.log_format;
             // A JSON log takes the native libraries' stderr lines in as
             // events, so that every line of it parses.
@@ -116,6 +116,7 @@ pub fn run() -> ExitCode {
             if let Some(Err(e)) = &captured {
                 tracing::warn!("the native libraries' messages stay on stderr: {e}");
             }
+            tracing::info!("configuration: {source}, then BOWLOC_ environment variables and flags");
             let served = serve::run(config);
             // stderr is itself again before an error is printed on it
             drop(captured);

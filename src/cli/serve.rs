@@ -3,17 +3,19 @@
 //! SIGTERM / SIGINT. `bowloc openapi` prints the service's API document.
 
 use super::LogFormatArg;
-use bowloc::server::config::{Config, Overrides};
+use bowloc::server::config::{Config, DEFAULT_FILE, Overrides};
 use clap::Args;
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 #[derive(Args)]
 pub struct ServeArgs {
     /// Configuration file (every key is documented in config/default.toml).
-    #[arg(long, default_value = "config/default.toml")]
-    config: PathBuf,
+    /// Without it: config/default.toml when the working directory has one,
+    /// else the built-in defaults, which are that file's values.
+    #[arg(long)]
+    config: Option<PathBuf>,
     /// Address to listen on (server.listen); port 0 picks a free port.
     #[arg(long)]
     listen: Option<SocketAddr>,
@@ -31,8 +33,9 @@ pub struct ServeArgs {
     log_format: Option<LogFormatArg>,
 }
 
-/// Load the configuration; errors name the key at fault.
-pub fn config(a: &ServeArgs) -> anyhow::Result<Config> {
+/// Load the configuration; errors name the key at fault. With it, where it
+/// came from, for the start-up log: the file, or the built-in defaults.
+pub fn config(a: &ServeArgs) -> anyhow::Result<(Config, String)> {
     let overrides = Overrides {
         listen: a.listen,
         vocabulary: a.vocab.clone(),
@@ -40,7 +43,16 @@ pub fn config(a: &ServeArgs) -> anyhow::Result<Config> {
         workers: a.workers,
         log_format: a.log_format.map(Into::into),
     };
-    Ok(Config::load(&a.config)?.apply(&overrides)?)
+    let default_file = Path::new(DEFAULT_FILE);
+    let (config, source) = match &a.config {
+        Some(path) => (Config::load(path)?, path.display().to_string()),
+        None if default_file.is_file() => (Config::load(default_file)?, DEFAULT_FILE.to_owned()),
+        None => (
+            Config::load_without_file()?,
+            format!("the built-in defaults (no {DEFAULT_FILE} in the working directory)"),
+        ),
+    };
+    Ok((config.apply(&overrides)?, source))
 }
 
 pub fn run(config: Config) -> anyhow::Result<()> {

@@ -19,6 +19,10 @@ use std::time::Duration;
 /// sets `search.top_n` (`__` separates a section from its key).
 pub const ENV_PREFIX: &str = "BOWLOC_";
 
+/// The configuration file `bowloc serve` reads when none is named, relative
+/// to the working directory (the repository's, which documents every key).
+pub const DEFAULT_FILE: &str = "config/default.toml";
+
 /// Everything `bowloc serve` reads at start-up.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -522,18 +526,37 @@ impl Config {
     /// [`KEEP_BUFFERS_VAR`](crate::features::KEEP_BUFFERS_VAR)); checked.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         if !path.is_file() {
+            let place = match std::env::current_dir() {
+                Ok(dir) if path.is_relative() => {
+                    format!(" in the working directory {}", dir.display())
+                }
+                _ => String::new(),
+            };
             return Err(ConfigError::new(format!(
-                "{}: configuration file not found",
+                "{}: configuration file not found{place}",
                 path.display()
             )));
         }
-        let figment = Figment::from(Serialized::defaults(Config::default()))
-            .merge(Toml::file_exact(path))
-            .merge(
-                Env::prefixed(ENV_PREFIX)
-                    .ignore(&[keep_buffers_key().as_str()])
-                    .split("__"),
-            );
+        Self::extract(Some(path))
+    }
+
+    /// Built-in defaults (the values [`DEFAULT_FILE`] documents), then
+    /// `BOWLOC_` environment variables; checked. What `bowloc serve` runs on
+    /// where no configuration file is named and none is at [`DEFAULT_FILE`].
+    pub fn load_without_file() -> Result<Self, ConfigError> {
+        Self::extract(None)
+    }
+
+    fn extract(path: Option<&Path>) -> Result<Self, ConfigError> {
+        let mut figment = Figment::from(Serialized::defaults(Config::default()));
+        if let Some(path) = path {
+            figment = figment.merge(Toml::file_exact(path));
+        }
+        let figment = figment.merge(
+            Env::prefixed(ENV_PREFIX)
+                .ignore(&[keep_buffers_key().as_str()])
+                .split("__"),
+        );
         let config: Config = figment.extract().map_err(|e| {
             let all: Vec<String> = e.into_iter().map(describe).collect();
             ConfigError::new(format!("invalid configuration: {}", all.join("; ")))
@@ -770,13 +793,48 @@ mod tests {
     }
 
     fn shipped() -> PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("config/default.toml")
+        Path::new(env!("CARGO_MANIFEST_DIR")).join(DEFAULT_FILE)
     }
 
     #[test]
     fn shipped_file_equals_the_built_in_defaults() {
         let text = std::fs::read_to_string(shipped()).unwrap();
         assert_eq!(load_str(&text, &[]).unwrap(), Config::default());
+    }
+
+    #[test]
+    #[allow(clippy::result_large_err)] // figment's error type, in a test
+    fn without_a_file_the_defaults_and_the_environment_apply_and_are_checked() {
+        Jail::expect_with(|jail| {
+            assert_eq!(Config::load_without_file().unwrap(), Config::default());
+            jail.set_env("BOWLOC_SEARCH__TOP_N", "3");
+            assert_eq!(Config::load_without_file().unwrap().search.top_n, 3);
+            jail.set_env("BOWLOC_SEARCH__TOP_N", "0");
+            let e = Config::load_without_file().unwrap_err().to_string();
+            assert!(e.contains("BOWLOC_SEARCH__TOP_N"), "{e}");
+            Ok(())
+        });
+    }
+
+    #[test]
+    #[allow(clippy::result_large_err)] // figment's error type, in a test
+    fn a_missing_file_is_named_with_the_working_directory_when_relative() {
+        Jail::expect_with(|jail| {
+            let e = Config::load(Path::new("nothere.toml"))
+                .unwrap_err()
+                .to_string();
+            let dir = jail.directory().canonicalize().unwrap();
+            assert!(
+                e.starts_with("nothere.toml: configuration file not found"),
+                "{e}"
+            );
+            assert!(e.contains(&dir.display().to_string()), "{e}");
+            let e = Config::load(&dir.join("nothere.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(!e.contains("working directory"), "{e}");
+            Ok(())
+        });
     }
 
     #[test]

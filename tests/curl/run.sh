@@ -83,10 +83,10 @@ enabled = false
 TOML
 }
 
-# launch CONFIG LOG [DIR]: starts it (in DIR, default here), sets PID and
-# BASE once it listens.
+# launch CONFIG LOG [DIR]: starts it (in DIR, default here; CONFIG "" names
+# no file), sets PID and BASE once it listens.
 launch() {
-  (cd "${3:-.}" && exec "$BIN" serve --config "$1") >"$2" 2>&1 &
+  (cd "${3:-.}" && exec "$BIN" serve ${1:+--config "$1"}) >"$2" 2>&1 &
   PID=$!
   SERVER_PIDS+=("$PID")
   local port="" i
@@ -100,9 +100,9 @@ launch() {
   BASE="http://127.0.0.1:$port"
 }
 
-# start_server CONFIG LOG: starts it, sets PID and BASE, waits for /readyz.
+# start_server CONFIG LOG [DIR]: starts it, sets PID and BASE, waits for /readyz.
 start_server() {
-  launch "$1" "$2" || return 1
+  launch "$1" "$2" "${3:-.}" || return 1
   local i
   for i in $(seq 1 300); do
     [ "$(curl -s -o /dev/null -w '%{http_code}' "$BASE/readyz")" = 200 ] && return 0
@@ -638,6 +638,20 @@ startup_fails "unknown section in the environment" "environment variable BOWLOC_
 mkdir -p "$TMP/a-directory"
 with_files dir-map "$V" "$TMP/a-directory"
 startup_fails "a directory as the map" "a-directory: is a directory, not a map file" "$TMP/dir-map.toml"
+startup_fails "a configuration file that is not there" \
+  "nothere.toml: configuration file not found in the working directory $(pwd)" nothere.toml
+
+# No configuration file named, and none at config/default.toml (an installed
+# binary, the container): the built-in defaults, then the environment.
+mkdir -p "$TMP/elsewhere"
+if BOWLOC_SERVER__LISTEN=127.0.0.1:0 BOWLOC_FILES__VOCABULARY="$V" BOWLOC_FILES__MAP="$M" \
+  BOWLOC_BOOTSTRAP__ENABLED=false start_server "" "$TMP/elsewhere.log" "$TMP/elsewhere"; then
+  check "without a configuration file it starts on the built-in defaults" \
+    grep -q 'configuration: the built-in defaults (no config/default.toml in the working directory)' "$TMP/elsewhere.log"
+  kill -TERM "$PID"; wait "$PID"
+else
+  fail "without a configuration file it starts on the built-in defaults"
+fi
 
 # --- connections: timeouts, cap, headers, seeds --------------------------------
 # A server with 1 s header and body timeouts and at most 4 connections.
