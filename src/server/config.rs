@@ -525,6 +525,12 @@ impl Config {
     /// environment variables (but the process's own,
     /// [`KEEP_BUFFERS_VAR`](crate::features::KEEP_BUFFERS_VAR)); checked.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        if path.is_dir() {
+            return Err(ConfigError::new(format!(
+                "{}: is a directory, not a configuration file",
+                path.display()
+            )));
+        }
         if !path.is_file() {
             let place = match std::env::current_dir() {
                 Ok(dir) if path.is_relative() => {
@@ -1134,6 +1140,12 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("not found"), "{e}");
+        let dir = std::env::temp_dir();
+        let e = Config::load(&dir).unwrap_err().to_string();
+        assert!(
+            e.ends_with(": is a directory, not a configuration file"),
+            "{e}"
+        );
     }
 
     #[test]

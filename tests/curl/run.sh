@@ -638,6 +638,7 @@ startup_fails "unknown section in the environment" "environment variable BOWLOC_
 mkdir -p "$TMP/a-directory"
 with_files dir-map "$V" "$TMP/a-directory"
 startup_fails "a directory as the map" "a-directory: is a directory, not a map file" "$TMP/dir-map.toml"
+startup_fails "a directory as the configuration" "a-directory: is a directory, not a configuration file" "$TMP/a-directory"
 startup_fails "a configuration file that is not there" \
   "nothere.toml: configuration file not found in the working directory $(pwd)" nothere.toml
 
