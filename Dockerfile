@@ -30,7 +30,7 @@ COPY .cargo .cargo
 RUN cargo chef cook --release --locked --recipe-path recipe.json --bin bowloc
 COPY . .
 # The release profile keeps line tables for backtraces (Cargo.toml); the image
-# takes the binary without them (13 MB instead of 96), symbols kept, so a
+# takes the binary without them (13 MB instead of 96, docs/service.md), symbols kept, so a
 # backtrace still names its functions.
 RUN cargo build --release --locked --bin bowloc \
  && strip --strip-debug -o /usr/local/bin/bowloc target/release/bowloc
