@@ -1,7 +1,9 @@
 //! The HTTP service in-process (the router driven with `tower::oneshot`),
 //! where finer control helps: protobuf answers decoded with prost and
 //! compared with the JSON answer, the served OpenAPI document against the
-//! committed one, and the not-ready state before the map is loaded.
+//! committed one, and the not-ready state before the map is loaded; and
+//! the connection layer on a loopback port, with an HTTP/2 client that
+//! multiplexes requests on one connection.
 
 mod common;
 
@@ -961,4 +963,98 @@ async fn a_compaction_while_serving_is_written_into_the_kept_plan() {
     let reopened = bowloc::server::bootstrap::load(&config, &Default::default()).unwrap();
     let memory = PlanMemory::of(&config).unwrap();
     assert!(matches!(memory.restore(&reopened), Restored::Resumed(l) if l.requests == 1));
+}
+
+/// HTTP/2 (prior knowledge) and HTTP/1.1 on one port: requests in flight
+/// at once on one HTTP/2 connection all answered, the connection sent
+/// GOAWAY once idle for the header timeout, and the server stops.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn http2_multiplexes_requests_beside_http1_and_idle_connections_end() {
+    use axum::body::Bytes;
+    use bowloc::server::connections;
+    use http_body_util::{BodyExt, Full};
+    use hyper_util::rt::{TokioExecutor, TokioIo};
+    use std::time::{Duration, Instant};
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    use tokio::net::{TcpListener, TcpStream};
+
+    let state = state(true);
+    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let address = listener.local_addr().unwrap();
+    let mut settings = connections::Settings::of(&state.config);
+    assert!(settings.http2, "HTTP/2 is on by default");
+    settings.header_timeout = Duration::from_millis(300);
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(connections::serve(
+        listener,
+        router(state.clone()),
+        settings,
+        async {
+            let _ = stopped.await;
+        },
+    ));
+
+    let stream = TcpStream::connect(address).await.unwrap();
+    let (sender, connection) =
+        hyper::client::conn::http2::handshake(TokioExecutor::new(), TokioIo::new(stream))
+            .await
+            .unwrap();
+    let connection = tokio::spawn(connection);
+    let image =
+        Bytes::from(std::fs::read(common::dataset("rtabmap-loop").join("images/5.jpg")).unwrap());
+    let requests: Vec<_> = (1..=3)
+        .map(|seed| {
+            let mut sender = sender.clone();
+            let request = Request::post(format!("http://bowloc/localize?seed={seed}"))
+                .header(header::CONTENT_TYPE, "image/jpeg")
+                .body(Full::new(image.clone()))
+                .unwrap();
+            tokio::spawn(async move {
+                let response = sender.send_request(request).await.unwrap();
+                let (version, status) = (response.version(), response.status());
+                let body = response.into_body().collect().await.unwrap().to_bytes();
+                (version, status, body)
+            })
+        })
+        .collect();
+    for request in requests {
+        let (version, status, body) = request.await.unwrap();
+        assert_eq!(
+            (version, status),
+            (axum::http::Version::HTTP_2, StatusCode::OK)
+        );
+        let answer: serde_json::Value = serde_json::from_slice(&body).unwrap();
+        assert!(
+            !answer["candidates"].as_array().unwrap().is_empty(),
+            "{answer}"
+        );
+    }
+    // the client keeps the connection (its sender) open
+    let answered = Instant::now();
+
+    // HTTP/1.1 on the same port meanwhile
+    let mut http1 = TcpStream::connect(address).await.unwrap();
+    http1
+        .write_all(b"GET /healthz HTTP/1.1\r\nHost: bowloc\r\nConnection: close\r\n\r\n")
+        .await
+        .unwrap();
+    let mut reply = String::new();
+    http1.read_to_string(&mut reply).await.unwrap();
+    assert!(reply.starts_with("HTTP/1.1 200"), "{reply}");
+
+    // idle for the header timeout: GOAWAY, the client acknowledges, it ends
+    tokio::time::timeout(Duration::from_secs(5), connection)
+        .await
+        .expect("an idle HTTP/2 connection is ended")
+        .unwrap()
+        .unwrap();
+    let idle = answered.elapsed();
+    assert!(idle >= Duration::from_millis(250), "ended after {idle:?}");
+    drop(sender);
+
+    let _ = stop.send(());
+    tokio::time::timeout(Duration::from_secs(5), server)
+        .await
+        .expect("the server stops")
+        .unwrap();
 }

@@ -203,6 +203,9 @@ pub struct ServerConfig {
     /// Answers gzip-compressed for clients that accept it (JSON, protobuf,
     /// the metrics and the page; never the JPEG thumbnails).
     pub compression: bool,
+    /// HTTP/2 without TLS beside HTTP/1.1 on the same port, for clients
+    /// that start with HTTP/2's preface ([`super::connections`]).
+    pub http2: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -333,6 +336,7 @@ impl Default for ServerConfig {
             drain_ms: 12_000,
             cors_origins: Vec::new(),
             compression: true,
+            http2: true,
         }
     }
 }

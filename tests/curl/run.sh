@@ -687,6 +687,29 @@ if start_server "$TMP/conn.toml" "$TMP/conn.log"; then
   t=$(raw 'POST /localize HTTP/1.1\r\nHost: x\r\nContent-Type: image/jpeg\r\nContent-Length: 1000\r\n\r\n')
   check "Content-Length: 1000 and no body → 408 body_timeout, closed (${t} s: $(head -1 "$TMP/raw" | tr -d '\r'))" \
     answered_408 "$t"
+  # HTTP/2 without TLS on the same port (server.http2, on by default), told
+  # from HTTP/1.1 by the first bytes.
+  status=$(curl -s --http2-prior-knowledge -o "$B" -w '%{http_version} %{http_code}' \
+    "${JPEG[@]}" --data-binary @"$IMG" "$BASE/localize?top_n=3")
+  h2_answered() { test "$status" = "2 200" && jq -e '.candidates | length > 0' "$B" >/dev/null; }
+  check "HTTP/2 with prior knowledge: /localize answered (version, status: $status)" h2_answered
+  status=$(curl -s --http2 -o /dev/null -w '%{http_version} %{http_code}' "$BASE/healthz")
+  check "a request asking to upgrade to h2c is answered in HTTP/1.1 ($status)" test "$status" = "1.1 200"
+  # frames FILE: the types of the HTTP/2 frames in FILE (9-byte headers:
+  # length, type, flags, stream)
+  frames() {
+    od -An -tu1 -v "$1" | tr -s ' \n' '\n' | grep . | awk '{ b[NR - 1] = $1 + 0 }
+      END { for (i = 0; i + 9 <= NR; i += 9 + b[i] * 65536 + b[i + 1] * 256 + b[i + 2]) printf "%s%d", (i ? " " : ""), b[i + 3] }'
+  }
+  # the preface and an empty SETTINGS frame, then silence: GOAWAY (type 7)
+  # after the 1 s header timeout, and as this client acknowledges nothing,
+  # closed a timeout later
+  t=$(raw 'PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n\x00\x00\x00\x04\x00\x00\x00\x00\x00')
+  goaway_when_idle() { awk -v x="$t" 'BEGIN { exit !(x >= 1.8 && x <= 3.5) }' && frames "$TMP/raw" | grep -qw 7; }
+  check "an idle HTTP/2 connection is sent GOAWAY and closed (${t} s; frame types $(frames "$TMP/raw"))" goaway_when_idle
+  t=$(raw 'PRI * HTTP/2.0\r\n')
+  check "a connection that stops inside HTTP/2's preface is closed at the header timeout (${t} s)" closed_silently "$t"
+
   # The cap: four idle connections hold every place; a fifth waits (curl
   # gives up after 0.5 s) until the idle ones time out.
   exec 3<>"/dev/tcp/127.0.0.1/$PORT" 4<>"/dev/tcp/127.0.0.1/$PORT" 5<>"/dev/tcp/127.0.0.1/$PORT" 6<>"/dev/tcp/127.0.0.1/$PORT"
