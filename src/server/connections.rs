@@ -16,7 +16,6 @@ use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
 use hyper_util::server::graceful::GracefulConnection;
 use hyper_util::service::TowerToHyperService;
 use std::net::SocketAddr;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::net::{TcpListener, TcpStream};
@@ -139,23 +138,33 @@ const GOAWAY_GRACE: Duration = Duration::from_secs(1);
 /// Requests in flight on an HTTP/2 connection, and since when it has had
 /// none.
 struct Activity {
-    in_flight: AtomicUsize,
-    idle_since: Mutex<Instant>,
+    state: Mutex<InFlightState>,
     none_in_flight: Notify,
+}
+
+struct InFlightState {
+    requests: usize,
+    idle_since: Instant,
 }
 
 impl Activity {
     fn new() -> Self {
         Self {
-            in_flight: AtomicUsize::new(0),
-            idle_since: Mutex::new(Instant::now()),
+            state: Mutex::new(InFlightState {
+                requests: 0,
+                idle_since: Instant::now(),
+            }),
             none_in_flight: Notify::new(),
         }
     }
 
+    fn state(&self) -> std::sync::MutexGuard<'_, InFlightState> {
+        self.state.lock().expect("not poisoned")
+    }
+
     /// A request began; the guard ends it.
     fn begin(self: &Arc<Self>) -> InFlight {
-        self.in_flight.fetch_add(1, Ordering::SeqCst);
+        self.state().requests += 1;
         InFlight(self.clone())
     }
 
@@ -164,17 +173,16 @@ impl Activity {
     async fn quiet_for(&self, quiet: Duration) {
         let from = Instant::now();
         loop {
-            loop {
-                let ended = self.none_in_flight.notified();
-                if self.in_flight.load(Ordering::SeqCst) == 0 {
-                    break;
-                }
-                ended.await;
-            }
-            let since = from.max(*self.idle_since.lock().expect("not poisoned"));
-            match quiet.checked_sub(since.elapsed()) {
-                Some(left) if !left.is_zero() => tokio::time::sleep(left).await,
-                _ => return,
+            let ended = self.none_in_flight.notified();
+            let left = {
+                let state = self.state();
+                (state.requests == 0)
+                    .then(|| quiet.saturating_sub(from.max(state.idle_since).elapsed()))
+            };
+            match left {
+                None => ended.await,
+                Some(left) if left.is_zero() => return,
+                Some(left) => tokio::time::sleep(left).await,
             }
         }
     }
@@ -185,8 +193,10 @@ struct InFlight(Arc<Activity>);
 
 impl Drop for InFlight {
     fn drop(&mut self) {
-        *self.0.idle_since.lock().expect("not poisoned") = Instant::now();
-        if self.0.in_flight.fetch_sub(1, Ordering::SeqCst) == 1 {
+        let mut state = self.0.state();
+        state.requests -= 1;
+        state.idle_since = Instant::now();
+        if state.requests == 0 {
             self.0.none_in_flight.notify_waiters();
         }
     }
@@ -244,7 +254,7 @@ pub async fn serve(
                         .http1()
                         .serve_connection(TokioIo::new(stream), TowerToHyperService::new(app));
                     // idle HTTP/1.1 connections end at hyper's header timeout
-                    until_done(conn, None, settings.header_timeout, stop_rx).await
+                    until_done(conn, None, stop_rx).await
                 }
                 Ok(Protocol::Http2) => serve_http2(stream, app, &settings, stop_rx).await,
                 Err(Unsniffed::Timeout) => {
@@ -295,40 +305,39 @@ async fn serve_http2(
     let conn = settings
         .http2()
         .serve_connection(TokioIo::new(stream), service);
-    until_done(conn, Some(&activity), settings.header_timeout, stopping).await
+    until_done(conn, Some((&activity, settings.header_timeout)), stopping).await
 }
 
-/// Run `conn` to its end; once the server stops, or (HTTP/2, `activity`
-/// given) once it has had no request in flight for `idle_timeout`, shut it
-/// down gracefully (HTTP/1.1: close after the answer in flight; HTTP/2:
-/// GOAWAY, the streams open still answered) and let it finish, an HTTP/2
-/// one within [`GOAWAY_GRACE`] of its last answer.
+/// Run `conn` to its end; once the server stops, or (HTTP/2, `idle` given)
+/// once it has had no request in flight for the duration given with its
+/// activity, shut it down gracefully (HTTP/1.1: close after the answer in
+/// flight; HTTP/2: GOAWAY, the streams open still answered) and let it
+/// finish, an HTTP/2 one within [`GOAWAY_GRACE`] of its last answer.
 async fn until_done<C>(
     conn: C,
-    activity: Option<&Activity>,
-    idle_timeout: Duration,
+    idle: Option<(&Activity, Duration)>,
     mut stopping: watch::Receiver<bool>,
 ) -> Result<(), hyper::Error>
 where
     C: GracefulConnection<Error = hyper::Error>,
 {
     tokio::pin!(conn);
-    let idle = async {
-        match activity {
-            Some(activity) => activity.quiet_for(idle_timeout).await,
+    let idle_for = async {
+        match idle {
+            Some((activity, timeout)) => activity.quiet_for(timeout).await,
             // HTTP/1.1: hyper's header timeout closes idle connections
             None => std::future::pending().await,
         }
     };
     tokio::select! {
         ended = conn.as_mut() => return ended,
-        () = idle => {}
+        () = idle_for => {}
         _ = stopping.wait_for(|stop| *stop) => {}
     }
     conn.as_mut().graceful_shutdown();
-    match activity {
+    match idle {
         None => conn.await,
-        Some(activity) => tokio::select! {
+        Some((activity, _)) => tokio::select! {
             ended = conn => ended,
             () = activity.quiet_for(GOAWAY_GRACE) => Ok(()),
         },
