@@ -267,6 +267,7 @@ impl SearchArgs {
             },
             place_window: self.place_window,
             tile_order: self.tile_order,
+            given_order: false,
             spare_core: None,
         })
     }

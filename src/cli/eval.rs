@@ -79,6 +79,11 @@ pub struct EvalArgs {
     /// The order the tiles are replayed in, as the service extracts them.
     #[arg(long, default_value_t = bowloc::search::TileOrder::default(), value_parser = super::args::choice_parser::<bowloc::search::TileOrder>())]
     tile_order: bowloc::search::TileOrder,
+    /// The order each tile's features are voted in (the service's is random;
+    /// `strongest` replays the largest detector response first, every run
+    /// alike).
+    #[arg(long, default_value_t = bowloc::eval::tiles::FeatureOrder::default(), value_parser = super::args::choice_parser::<bowloc::eval::tiles::FeatureOrder>())]
+    feature_order: bowloc::eval::tiles::FeatureOrder,
     /// Images on each side, along the map's order, that count as one place
     /// when a candidate's distinctness is measured (and for the rule
     /// place-lead).
@@ -139,6 +144,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         place_window: a.place_window,
         distinct_cut: a.distinct_cut,
         tile_order: a.tile_order,
+        feature_order: a.feature_order,
         plan_orders: a.plan_orders,
         vocab: a.vocab,
         out: a

@@ -123,6 +123,8 @@ pub struct EvalConfig {
     pub place_window: u32,
     /// The order the queries' tiles are replayed in.
     pub tile_order: crate::search::TileOrder,
+    /// The order each tile's features are voted in.
+    pub feature_order: tiles::FeatureOrder,
     /// With a learned coarse pass: fresh plans replayed over this many
     /// random query orders for every setting asked for ([`plan_orders`]).
     pub plan_orders: u32,
@@ -167,6 +169,8 @@ pub struct ConfigInfo {
     pub tiles: String,
     /// The order their tiles were replayed in.
     pub tile_order: String,
+    /// The order each tile's features were voted in.
+    pub feature_order: String,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -506,10 +510,18 @@ struct Words {
 /// Stage 2: each query quantized once per vocabulary (timed). Streamed
 /// queries carry the geometry the `verified` stop and re-ranking use,
 /// shared across seeds.
-fn quantize_sets(sets: &QuerySets, vocabs: &[Vocabulary], verify: &VerifyParams) -> Words {
+fn quantize_sets(
+    sets: &QuerySets,
+    vocabs: &[Vocabulary],
+    verify: &VerifyParams,
+    order: tiles::FeatureOrder,
+) -> Words {
     let geometry = tiles::Geometry::shared(verify);
     let quantize = |set: &cache::DescriptorSet, v: &Vocabulary, what: String| {
-        let (queries, costs) = quantize_queries(set, v, &what);
+        let (mut queries, costs) = quantize_queries(set, v, &what);
+        if order == tiles::FeatureOrder::Strongest {
+            queries.iter_mut().for_each(Query::strongest_first);
+        }
         SeedWords { queries, costs }
     };
     let streamed = |set: &cache::DescriptorSet, what: &str| -> Vec<SeedWords> {
@@ -905,7 +917,12 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
     // one query per core), geometric verification as the service does it:
     // for the `verified` stop always, for re-ranking in the `+verify` settings
     crate::features::set_opencv_threads(1);
-    let words = quantize_sets(&sets, &vocabs, &config.verify.clone().unwrap_or_default());
+    let words = quantize_sets(
+        &sets,
+        &vocabs,
+        &config.verify.clone().unwrap_or_default(),
+        config.feature_order,
+    );
     stages.quantize_s = seconds_since(&mut clock);
 
     // 3. the settings planned, then swept
@@ -913,6 +930,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         top_n: summary::TOP_N.iter().copied().max().unwrap_or(10),
         place_window: config.place_window,
         tile_order: config.tile_order,
+        given_order: config.feature_order != tiles::FeatureOrder::Random,
     };
     let plan = plan_sweep(
         config,
@@ -1005,6 +1023,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             extract,
             tiles: config.tiles.to_string(),
             tile_order: config.tile_order.to_string(),
+            feature_order: config.feature_order.to_string(),
         },
         machine,
         vocabularies: vocabs

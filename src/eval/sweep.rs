@@ -121,6 +121,7 @@ impl Setting {
             top_n: ranking.top_n,
             place_window: ranking.place_window,
             tile_order: ranking.tile_order,
+            given_order: ranking.given_order,
             seed,
             min_features: self.min_features,
             // as the service searches a query it verifies
@@ -132,12 +133,15 @@ impl Setting {
 
 /// How every search of a sweep runs besides its setting: the candidates it
 /// keeps, the place window their distinctness (and the rule `place-lead`)
-/// is measured with, and the order its query's tiles are replayed in.
+/// is measured with, the order its query's tiles are replayed in, and
+/// whether each tile's features are voted in the order the query holds them
+/// ([`SearchOptions::given_order`]) rather than a random one.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ranking {
     pub top_n: usize,
     pub place_window: u32,
     pub tile_order: TileOrder,
+    pub given_order: bool,
 }
 
 impl Ranking {
@@ -147,6 +151,7 @@ impl Ranking {
             top_n: n,
             place_window: SearchOptions::PLACE_WINDOW,
             tile_order: TileOrder::default(),
+            given_order: false,
         }
     }
 }

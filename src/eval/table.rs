@@ -525,7 +525,8 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
         "### Time per query and stage (ms, median / p95 over seeds × queries × runs)\n\n\
          Wall time {:.1} s (extract {:.1} s, vocabularies {:.1} s, maps {:.1} s, quantize \
          queries {:.1} s, calibrate {:.1} s, sweep {:.1} s). \
-         Queries are streamed in `{}` tiles, in the `{}` tile order, as the service does: \
+         Queries are streamed in `{}` tiles, in the `{}` tile order, each tile's features \
+         in the `{}` order, as the service does (its feature order is `random`): \
          extract = decode + SIFT of the tiles extracted (each tile timed when the query was \
          cached; the corner count that orders the tiles is in every tiled query's fixed \
          cost); quantize = the \
@@ -548,6 +549,7 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
         t.sweep_s,
         report.config.tiles,
         report.config.tile_order,
+        report.config.feature_order,
         markdown_table(&header, &rows)
     )
 }

@@ -51,6 +51,37 @@ pub struct Query {
     pub geometry: Option<Arc<Geometry>>,
 }
 
+/// The order a replayed query's features are voted in, inside each tile.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FeatureOrder {
+    /// A random order drawn from the search's seed, as the service votes.
+    #[default]
+    Random,
+    /// The keypoints with the largest detector response first (the same
+    /// order on every run).
+    Strongest,
+}
+
+impl FeatureOrder {
+    pub const ALL: [FeatureOrder; 2] = [FeatureOrder::Random, FeatureOrder::Strongest];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            FeatureOrder::Random => "random",
+            FeatureOrder::Strongest => "strongest",
+        }
+    }
+
+    pub fn about(self) -> &'static str {
+        match self {
+            FeatureOrder::Random => "a random order drawn from the seed, as the service votes",
+            FeatureOrder::Strongest => "the largest detector response first",
+        }
+    }
+}
+
+named_choice!(FeatureOrder, "feature order");
+
 /// Geometric verification as the service does it.
 pub struct Geometry {
     pub fit: Box<dyn ModelFit>,
@@ -87,6 +118,37 @@ impl Query {
         Self {
             words,
             ..Self::default()
+        }
+    }
+
+    /// Sort the features of each tile by their keypoint's response, the
+    /// strongest first (a search told [`SearchOptions::given_order`] then
+    /// votes them so). A query without keypoints is left as it is.
+    pub fn strongest_first(&mut self) {
+        if self.keypoints.len() != self.words.len() {
+            return;
+        }
+        let spans: Vec<usize> = if self.tiles.is_empty() {
+            vec![self.words.len()]
+        } else {
+            self.tiles.iter().map(|t| t.features as usize).collect()
+        };
+        let mut order: Vec<usize> = Vec::with_capacity(self.words.len());
+        let mut start = 0;
+        for n in spans {
+            let mut span: Vec<usize> = (start..start + n).collect();
+            let response = |i: usize| self.keypoints[i].response;
+            span.sort_by(|&a, &b| response(b).total_cmp(&response(a)));
+            order.extend(span);
+            start += n;
+        }
+        fn take<T: Copy>(values: &[T], order: &[usize]) -> Vec<T> {
+            order.iter().map(|&i| values[i]).collect()
+        }
+        self.words = take(&self.words, &order);
+        self.keypoints = take(&self.keypoints, &order);
+        if self.signatures.len() == order.len() {
+            self.signatures = take(&self.signatures, &order);
         }
     }
 
@@ -319,6 +381,74 @@ mod tests {
             (o.features_used, o.features_total, r.tiles, r.extract_ms),
             (16, 40, 1, 0.0)
         );
+    }
+
+    #[test]
+    fn strongest_first_sorts_inside_each_tile_and_the_search_votes_in_that_order() {
+        let mut b = MapBuilder::new(4);
+        for j in 0..4u32 {
+            b.add(ImageWords::from_words(format!("{j}"), &[j]));
+        }
+        let map = b.build("t", "0", None);
+        let tile = |features| Tile {
+            features,
+            area: 0.5,
+            ms: 1.0,
+            corners: 0.0,
+            cell: [0, 0],
+        };
+        let keypoint = |response| Keypoint {
+            response,
+            ..Keypoint::default()
+        };
+        // tile 0: words 0, 1, 2 (responses 1, 3, 2); tile 1: words 3, 0
+        let mut q = Query {
+            words: vec![0, 1, 2, 3, 0],
+            signatures: vec![10, 11, 12, 13, 14],
+            keypoints: [1.0, 3.0, 2.0, 0.5, 9.0].map(keypoint).to_vec(),
+            tiles: vec![tile(3), tile(2)],
+            ..Query::default()
+        };
+        q.strongest_first();
+        assert_eq!(q.words, [1, 2, 0, 0, 3]);
+        assert_eq!(q.signatures, [11, 12, 10, 14, 13]);
+        let responses: Vec<f32> = q.keypoints.iter().map(|k| k.response).collect();
+        assert_eq!(responses, [3.0, 2.0, 1.0, 9.0, 0.5]);
+        // told to keep the order given, the search votes word 1 first
+        let options = |given_order| SearchOptions {
+            rule: RuleSpec::new("fixed", Some(0.2)).unwrap(),
+            tile_order: TileOrder::Random,
+            given_order,
+            ..SearchOptions::default()
+        };
+        let first = |given_order| {
+            let r = Query {
+                tiles: Vec::new(),
+                ..q.clone()
+            }
+            .search(&map, &options(given_order), false);
+            assert_eq!(r.outcome.features_used, 1);
+            r.outcome.candidates[0].id
+        };
+        assert_eq!(first(true), 1);
+        let random: std::collections::HashSet<u32> = (0..32)
+            .map(|seed| {
+                let r = Query {
+                    tiles: Vec::new(),
+                    ..q.clone()
+                }
+                .search(
+                    &map,
+                    &SearchOptions {
+                        seed,
+                        ..options(false)
+                    },
+                    false,
+                );
+                r.outcome.candidates[0].id
+            })
+            .collect();
+        assert!(random.len() > 1, "a random order starts elsewhere too");
     }
 
     #[test]

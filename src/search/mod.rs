@@ -86,6 +86,10 @@ pub struct SearchOptions {
     pub place_window: u32,
     /// The order a query's tiles are extracted in.
     pub tile_order: TileOrder,
+    /// Vote each batch's features in the order given (numbered from 0)
+    /// instead of a random one drawn from the seed: for evaluation, which
+    /// can replay its queries sorted (`bowloc eval --feature-order`).
+    pub given_order: bool,
     /// When the rule stops a streamed query inside a tile, vote the tile's
     /// other features before ending ([`Search::feed_tile`]). Set when the
     /// answer is verified: the tile's extraction is paid for, its other
@@ -136,6 +140,7 @@ impl Default for SearchOptions {
             hamming: Some(HammingWeights::DEFAULT),
             place_window: Self::PLACE_WINDOW,
             tile_order: TileOrder::default(),
+            given_order: false,
             finish_tile: false,
             spare_core: None,
         }
@@ -321,6 +326,16 @@ fn batch_seed(seed: u64, k: u64) -> u64 {
     seed.wrapping_add(k.wrapping_mul(0x9E37_79B9_7F4A_7C15))
 }
 
+/// The order the `count` features of batch `k` are voted in: random from
+/// the options' seed, or as given ([`SearchOptions::given_order`]).
+fn batch_order(options: &SearchOptions, count: usize, k: u64) -> Vec<u32> {
+    if options.given_order {
+        (0..count as u32).collect()
+    } else {
+        permute::permutation(count, batch_seed(options.seed, k))
+    }
+}
+
 /// A search in progress: feed it batches of features until it stops or the
 /// features run out, then [`finish`](Search::finish) it.
 pub struct Search<'m> {
@@ -445,7 +460,7 @@ impl<'m> Search<'m> {
     }
 
     /// Vote a batch of `count` features in a random order drawn from the
-    /// seed. `quantize(indices, words, signatures)` fills
+    /// seed (in their own order with [`SearchOptions::given_order`]). `quantize(indices, words, signatures)` fills
     /// `words[..indices.len()]` and `signatures[..indices.len()]` with the
     /// words and Hamming signatures of the batch's features at `indices`
     /// (numbered in the batch from 0). Returns whether the search has stopped.
@@ -468,7 +483,7 @@ impl<'m> Search<'m> {
         if self.stopped() {
             return true;
         }
-        let order = permute::permutation(count, batch_seed(self.options.seed, self.batches));
+        let order = batch_order(&self.options, count, self.batches);
         let offset = (self.numbered_from + self.fed) as u32;
         self.batches += 1;
         self.fed += count;

@@ -20,8 +20,7 @@ use super::rank::Ranked;
 use super::stop::{RuleContext, StopRule};
 use super::vote::{Needs, Tally, VoteStats, Voter};
 use super::{
-    KnownFeatures, SearchOptions, SearchOutcome, SearchTimings, StopInfo, StopKind, batch_seed,
-    permute,
+    KnownFeatures, SearchOptions, SearchOutcome, SearchTimings, StopInfo, StopKind, batch_order,
 };
 use crate::index::{MapIndex, MapView, Postings, StringTable};
 use serde::Serialize;
@@ -378,7 +377,7 @@ pub fn search_tiles(
         } else if merged.tally.total.is_none() {
             merged.tally.expected_total = Some(fed as f64 / share.max(1e-9));
         }
-        let order = permute::permutation(words.len(), batch_seed(options.seed, k as u64));
+        let order = batch_order(options, words.len(), k as u64);
         for indices in order.chunks(block) {
             // one round: the block to every shard, each shard's reports back
             traffic.rounds += 1;

@@ -117,6 +117,8 @@ impl AppState {
                 hamming: s.hamming.then_some(crate::search::HammingWeights::DEFAULT),
                 place_window: s.place_window,
                 tile_order: s.tile_order,
+                // the service votes in a random order
+                given_order: false,
                 // set per request, when its answer is verified
                 finish_tile: false,
                 // set per request, from the pool's load
