@@ -2,7 +2,9 @@
 //! grouped by tile (in grid order) with what each tile cost to extract, so
 //! the sweep can feed tiles in the order the service would draw for the same
 //! seed, stop extracting where the service would, and charge a setting only
-//! for the tiles it extracted.
+//! for the tiles it extracted. Inside a tile the features are voted in the
+//! service's random order or, to measure another, strongest first
+//! ([`FeatureOrder`]).
 
 use crate::geometry::Keypoint;
 use crate::geometry::verify::{
