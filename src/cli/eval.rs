@@ -79,9 +79,8 @@ pub struct EvalArgs {
     /// The order the tiles are replayed in, as the service extracts them.
     #[arg(long, default_value_t = bowloc::search::TileOrder::default(), value_parser = super::args::choice_parser::<bowloc::search::TileOrder>())]
     tile_order: bowloc::search::TileOrder,
-    /// The order each tile's features are voted in (the service's is random;
-    /// `strongest` replays the largest detector response first, every run
-    /// alike).
+    /// The order each tile's features are voted in (the service votes in a
+    /// random one).
     #[arg(long, default_value_t = bowloc::eval::tiles::FeatureOrder::default(), value_parser = super::args::choice_parser::<bowloc::eval::tiles::FeatureOrder>())]
     feature_order: bowloc::eval::tiles::FeatureOrder,
     /// Images on each side, along the map's order, that count as one place

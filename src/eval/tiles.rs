@@ -123,6 +123,21 @@ impl Query {
         }
     }
 
+    /// Where each tile's features start in [`words`](Self::words), in grid
+    /// order, and after the last where they end; a query without tiles is
+    /// one, the whole image.
+    fn starts(&self) -> Vec<usize> {
+        if self.tiles.is_empty() {
+            return vec![0, self.words.len()];
+        }
+        let mut starts = Vec::with_capacity(self.tiles.len() + 1);
+        starts.push(0usize);
+        for t in &self.tiles {
+            starts.push(starts.last().unwrap() + t.features as usize);
+        }
+        starts
+    }
+
     /// Sort the features of each tile by their keypoint's response, the
     /// strongest first (a search told [`SearchOptions::given_order`] then
     /// votes them so). A query without keypoints is left as it is.
@@ -130,19 +145,12 @@ impl Query {
         if self.keypoints.len() != self.words.len() {
             return;
         }
-        let spans: Vec<usize> = if self.tiles.is_empty() {
-            vec![self.words.len()]
-        } else {
-            self.tiles.iter().map(|t| t.features as usize).collect()
-        };
+        let response = |i: usize| self.keypoints[i].response;
         let mut order: Vec<usize> = Vec::with_capacity(self.words.len());
-        let mut start = 0;
-        for n in spans {
-            let mut span: Vec<usize> = (start..start + n).collect();
-            let response = |i: usize| self.keypoints[i].response;
-            span.sort_by(|&a, &b| response(b).total_cmp(&response(a)));
-            order.extend(span);
-            start += n;
+        for span in self.starts().windows(2) {
+            let mut tile: Vec<usize> = (span[0]..span[1]).collect();
+            tile.sort_by(|&a, &b| response(b).total_cmp(&response(a)));
+            order.extend(tile);
         }
         fn take<T: Copy>(values: &[T], order: &[usize]) -> Vec<T> {
             order.iter().map(|&i| values[i]).collect()
@@ -167,11 +175,7 @@ impl Query {
         if self.tiles.is_empty() {
             return (vec![0], vec![(0, self.words.len(), 1.0)]);
         }
-        let mut starts = Vec::with_capacity(self.tiles.len() + 1);
-        starts.push(0usize);
-        for t in &self.tiles {
-            starts.push(starts.last().unwrap() + t.features as usize);
-        }
+        let starts = self.starts();
         let coarse = usize::from(self.coarse_first);
         let corners: Vec<f32> = self.tiles.iter().skip(coarse).map(|t| t.corners).collect();
         let cells: Vec<[u32; 2]> = self.tiles.iter().skip(coarse).map(|t| t.cell).collect();
@@ -338,24 +342,34 @@ mod tests {
     use crate::index::{ImageWords, MapBuilder};
     use crate::search::RuleSpec;
 
-    #[test]
-    fn replay_charges_only_the_tiles_extracted() {
+    /// A map of four images, image j holding word j alone.
+    fn four_images() -> MapIndex {
         let mut b = MapBuilder::new(4);
         for j in 0..4u32 {
             b.add(ImageWords::from_words(format!("{j}"), &[j]));
         }
-        let map = b.build("t", "0", None);
-        // four tiles of 10 features each, all voting for image 0
-        let tile = Tile {
-            features: 10,
+        b.build("t", "0", None)
+    }
+
+    /// A tile of `features` features, a quarter of the image, 5 ms to
+    /// extract, no corners, in the grid's first cell.
+    fn tile(features: u32) -> Tile {
+        Tile {
+            features,
             area: 0.25,
             ms: 5.0,
             corners: 0.0,
             cell: [0, 0],
-        };
+        }
+    }
+
+    #[test]
+    fn replay_charges_only_the_tiles_extracted() {
+        let map = four_images();
+        // four tiles of 10 features each, all voting for image 0
         let q = Query {
             words: vec![0; 40],
-            tiles: vec![tile; 4],
+            tiles: vec![tile(10); 4],
             fixed_ms: 2.0,
             ..Query::default()
         };
@@ -387,18 +401,7 @@ mod tests {
 
     #[test]
     fn strongest_first_sorts_inside_each_tile_and_the_search_votes_in_that_order() {
-        let mut b = MapBuilder::new(4);
-        for j in 0..4u32 {
-            b.add(ImageWords::from_words(format!("{j}"), &[j]));
-        }
-        let map = b.build("t", "0", None);
-        let tile = |features| Tile {
-            features,
-            area: 0.5,
-            ms: 1.0,
-            corners: 0.0,
-            cell: [0, 0],
-        };
+        let map = four_images();
         let keypoint = |response| Keypoint {
             response,
             ..Keypoint::default()
@@ -416,50 +419,36 @@ mod tests {
         assert_eq!(q.signatures, [11, 12, 10, 14, 13]);
         let responses: Vec<f32> = q.keypoints.iter().map(|k| k.response).collect();
         assert_eq!(responses, [3.0, 2.0, 1.0, 9.0, 0.5]);
-        // told to keep the order given, the search votes word 1 first
-        let options = |given_order| SearchOptions {
-            rule: RuleSpec::new("fixed", Some(0.2)).unwrap(),
-            tile_order: TileOrder::Random,
-            given_order,
-            ..SearchOptions::default()
+        // one feature voted (the image as one batch): told to keep the
+        // order given, the search votes the strongest, word 1, every time
+        let whole = Query {
+            tiles: Vec::new(),
+            ..q.clone()
         };
-        let first = |given_order| {
-            let r = Query {
-                tiles: Vec::new(),
-                ..q.clone()
-            }
-            .search(&map, &options(given_order), false);
+        let first = |seed, given_order| {
+            let options = SearchOptions {
+                rule: RuleSpec::new("fixed", Some(0.2)).unwrap(),
+                seed,
+                given_order,
+                ..SearchOptions::default()
+            };
+            let r = whole.search(&map, &options, false);
             assert_eq!(r.outcome.features_used, 1);
             r.outcome.candidates[0].id
         };
-        assert_eq!(first(true), 1);
-        let random: std::collections::HashSet<u32> = (0..32)
-            .map(|seed| {
-                let r = Query {
-                    tiles: Vec::new(),
-                    ..q.clone()
-                }
-                .search(
-                    &map,
-                    &SearchOptions {
-                        seed,
-                        ..options(false)
-                    },
-                    false,
-                );
-                r.outcome.candidates[0].id
-            })
-            .collect();
-        assert!(random.len() > 1, "a random order starts elsewhere too");
+        let firsts = |given_order| -> std::collections::HashSet<u32> {
+            (0..32).map(|seed| first(seed, given_order)).collect()
+        };
+        assert_eq!(firsts(true), [1].into());
+        assert!(
+            firsts(false).len() > 1,
+            "a random order starts elsewhere too"
+        );
     }
 
     #[test]
     fn the_richest_tile_is_replayed_first_and_its_corners_set_the_estimate() {
-        let mut b = MapBuilder::new(4);
-        for j in 0..4u32 {
-            b.add(ImageWords::from_words(format!("{j}"), &[j]));
-        }
-        let map = b.build("t", "0", None);
+        let map = four_images();
         // tile t's 10 features all vote for image t; tile 2 has most corners
         let corners = [1.0, 0.0, 6.0, 3.0];
         let q = Query {
@@ -468,11 +457,9 @@ mod tests {
                 .iter()
                 .enumerate()
                 .map(|(t, &c)| Tile {
-                    features: 10,
-                    area: 0.25,
-                    ms: 5.0,
                     corners: c,
                     cell: [t as u32 % 2, t as u32 / 2],
+                    ..tile(10)
                 })
                 .collect(),
             ..Query::default()
