@@ -733,6 +733,37 @@ impl Config {
         self.search.tiles.parse()
     }
 
+    /// The search a request gets when it asks for nothing: the default rule
+    /// and the `search` section's settings (a request's seed, deadline,
+    /// prior and spare core are its own).
+    pub fn search_options(&self) -> Result<crate::search::SearchOptions, String> {
+        let s = &self.search;
+        Ok(crate::search::SearchOptions {
+            rule: self.default_rule()?,
+            top_n: s.top_n,
+            seed: 0,
+            block: s.block,
+            min_features: s.min_features,
+            min_score: s.min_score,
+            min_distinct: s.min_distinct,
+            deadline: None,
+            // checked with the configuration
+            budget: s
+                .budget_ms
+                .and_then(|ms| crate::search::budget::check_ms(ms).ok()),
+            prior: None,
+            hamming: s.hamming.then_some(crate::search::HammingWeights::DEFAULT),
+            place_window: s.place_window,
+            tile_order: s.tile_order,
+            // the service votes in a random order
+            given_order: false,
+            // set per request, when its answer is verified
+            finish_tile: false,
+            // set per request, from the pool's load
+            spare_core: None,
+        })
+    }
+
     /// The default rule with its parameter and verified stop: those given,
     /// else the built-in rule's own when `search.rule` names it.
     pub fn default_rule(&self) -> Result<RuleSpec, String> {

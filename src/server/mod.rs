@@ -97,33 +97,8 @@ pub struct AppState {
 impl AppState {
     /// State for `config` (already checked), with no map loaded yet.
     pub fn new(config: Config) -> anyhow::Result<Arc<Self>> {
-        let rule = config.default_rule().map_err(anyhow::Error::msg)?;
-        let s = &config.search;
         let defaults = Defaults {
-            options: crate::search::SearchOptions {
-                rule,
-                top_n: s.top_n,
-                seed: 0,
-                block: s.block,
-                min_features: s.min_features,
-                min_score: s.min_score,
-                min_distinct: s.min_distinct,
-                deadline: None,
-                // checked with the configuration
-                budget: s
-                    .budget_ms
-                    .and_then(|ms| crate::search::budget::check_ms(ms).ok()),
-                prior: None,
-                hamming: s.hamming.then_some(crate::search::HammingWeights::DEFAULT),
-                place_window: s.place_window,
-                tile_order: s.tile_order,
-                // the service votes in a random order
-                given_order: false,
-                // set per request, when its answer is verified
-                finish_tile: false,
-                // set per request, from the pool's load
-                spare_core: None,
-            },
+            options: config.search_options().map_err(anyhow::Error::msg)?,
             max_top_n: config.limits.max_top_n,
         };
         let pool = WorkerPool::new(config.worker_count(), config.limits.queue);
