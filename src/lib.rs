@@ -12,7 +12,8 @@
 //! - [`quantize`] — descriptor → nearest visual word, batched through a
 //!   matrix multiply.
 //! - [`vocabulary`] — the visual words (k-means centroids) and their training,
-//!   and the Hamming embedding that signs each feature within its word.
+//!   the Hamming embedding that signs each feature within its word, and
+//!   binary words for binary (ORB) descriptors.
 //! - [`geometry`] — keypoints as plain numbers (position, size, angle), the
 //!   word pairs between a query and a map image, and the verification that
 //!   re-ranks candidates by inliers (its model fit is OpenCV's, behind a

@@ -2,8 +2,9 @@
 //! their precomputed squared norms, the extraction settings they were
 //! trained with, and the Hamming embedding that signs each feature within
 //! its word (`hamming`). Loaded by memory-mapping a store file; trained by
-//! `kmeans`.
+//! `kmeans`. Binary words for binary descriptors (ORB's) are `binary`.
 
+pub mod binary;
 mod file;
 pub mod hamming;
 pub mod kmeans;
