@@ -28,6 +28,9 @@
 //! ratios of the request time to the full search's, with the default alone
 //! beside it (docs/performance.md, "An ORB pass before SIFT").
 //!
+//! With a fourth argument EVERY, only every EVERY-th query is used (query
+//! numbers in the output count those), as `scripts/latency.sh` takes them.
+//!
 //! ```sh
 //! scripts/orb-pass.sh
 //! ```
@@ -49,7 +52,7 @@ const ORB_FEATURES: i32 = 1000;
 const WORDS: usize = 1000;
 const ITERATIONS: usize = 8;
 const TOP: usize = 5;
-/// (inlier floor, |ln scale| window) settings of the pass.
+/// The pass's settings: (pick, inlier floor, |ln scale| window).
 const SETTINGS: [(Pick, usize, f64); 6] = [
     (Pick::NearestScale, 20, 0.1),
     (Pick::NearestScale, 30, 0.1),
@@ -82,9 +85,8 @@ fn orb_of(bytes: &[u8], detector: &mut opencv::core::Ptr<ORB>) -> anyhow::Result
     let config = ExtractConfig::default();
     let t = Instant::now();
     let image = decode(bytes, DecodeLimits::default(), config.max_side)?;
-    let frame = bowloc::features::Frame::new(&image, &config)?;
+    let mut frame = bowloc::features::Frame::new(&image, &config)?;
     let decode_ms = t.elapsed().as_secs_f64() * 1e3;
-    let mut frame = frame;
     let (mat, _) = frame.parts();
     let t = Instant::now();
     let (mut keys, mut raw) = (Vector::<KeyPoint>::new(), Mat::default());
@@ -269,13 +271,26 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let [_, dir, vocab, map_path, ..] = args.as_slice() else {
-        anyhow::bail!("usage: orb_pass DATASET VOCAB.bowvoc MAP.bowmap");
+    let [_, dir, vocab, map_path, rest @ ..] = args.as_slice() else {
+        anyhow::bail!("usage: orb_pass DATASET VOCAB.bowvoc MAP.bowmap [EVERY]");
     };
+    // every EVERY-th query only (the first, the EVERY+1-th, …), as
+    // scripts/latency.sh takes them
+    let every: usize = rest.first().map_or(Ok(1), |s| s.parse())?;
+    anyhow::ensure!(every > 0, "EVERY must be at least 1");
     // as the binary does: image buffers kept mapped, one OpenCV thread
     bowloc::features::keep_image_buffers();
     bowloc::features::set_opencv_threads(1);
-    let dataset = Dataset::open(std::path::Path::new(dir))?;
+    let mut dataset = Dataset::open(std::path::Path::new(dir))?;
+    let keep = |i: &usize| i.is_multiple_of(every);
+    dataset.queries = (0..dataset.queries.len())
+        .filter(keep)
+        .map(|i| dataset.queries[i].clone())
+        .collect();
+    dataset.truth = (0..dataset.truth.len())
+        .filter(keep)
+        .map(|i| dataset.truth[i].clone())
+        .collect();
     // the service's default configuration on these files
     let mut config = Config::default();
     config.files.vocabulary = vocab.into();
