@@ -79,13 +79,17 @@ struct Orb {
     descriptors: Vec<BinaryDescriptor>,
 }
 
-/// ORB of an image decoded to the service's frame; with the time the decode
-/// and ORB took (ms).
-fn orb_of(bytes: &[u8], detector: &mut opencv::core::Ptr<ORB>) -> anyhow::Result<(Orb, f64, f64)> {
-    let config = ExtractConfig::default();
+/// ORB of an image decoded to the frame of `config` (the vocabulary's
+/// extraction settings, as the service's); with the time the decode and ORB
+/// took (ms).
+fn orb_of(
+    bytes: &[u8],
+    config: &ExtractConfig,
+    detector: &mut opencv::core::Ptr<ORB>,
+) -> anyhow::Result<(Orb, f64, f64)> {
     let t = Instant::now();
     let image = decode(bytes, DecodeLimits::default(), config.max_side)?;
-    let mut frame = bowloc::features::Frame::new(&image, &config)?;
+    let mut frame = bowloc::features::Frame::new(&image, config)?;
     let decode_ms = t.elapsed().as_secs_f64() * 1e3;
     let (mat, _) = frame.parts();
     let t = Instant::now();
@@ -304,7 +308,7 @@ fn main() -> anyhow::Result<()> {
     let map_orb: Vec<Orb> = dataset
         .map
         .par_iter()
-        .map(|r| Ok(orb_of(&read(r)?, &mut detector()?)?.0))
+        .map(|r| Ok(orb_of(&read(r)?, &localizer.extract, &mut detector()?)?.0))
         .collect::<anyhow::Result<_>>()?;
     let all: Vec<BinaryDescriptor> = map_orb.iter().flat_map(|m| m.descriptors.clone()).collect();
     let vocabulary = BinaryVocabulary::train(&all, WORDS, ITERATIONS, seed);
@@ -358,7 +362,7 @@ fn main() -> anyhow::Result<()> {
             localizer.learn(plan, &answer);
             Ok(ids(answer))
         })?;
-        let (query, decode_ms, orb_ms) = orb_of(&bytes, &mut orb)?;
+        let (query, decode_ms, orb_ms) = orb_of(&bytes, &localizer.extract, &mut orb)?;
         let t = Instant::now();
         let words: Vec<u32> = query
             .descriptors

@@ -1,8 +1,8 @@
 //! Binary visual words: K 256-bit centroids of binary descriptors (ORB's),
 //! trained by k-majority (k-means under the Hamming distance, each centroid
 //! the bitwise majority of the descriptors nearest it) and searched
-//! exhaustively with popcounts. Plain arrays only: what makes the
-//! descriptors lives at the edge (`features`).
+//! exhaustively with popcounts. Plain arrays only: OpenCV, which makes the
+//! descriptors, stays with the caller (today `examples/orb_pass.rs`).
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -52,9 +52,7 @@ impl BinaryVocabulary {
         }
         let mut words = spread_seeds(data, k, &mut rng);
         for _ in 0..iterations {
-            let vocabulary = Self { words };
-            let assigned: Vec<u32> = data.par_iter().map(|d| vocabulary.word(d)).collect();
-            words = vocabulary.words;
+            let assigned: Vec<u32> = data.par_iter().map(|d| nearest(&words, d)).collect();
             let mut ones = vec![[0u32; 256]; k];
             let mut sizes = vec![0u32; k];
             for (d, &w) in data.iter().zip(&assigned) {
@@ -93,15 +91,21 @@ impl BinaryVocabulary {
     /// The nearest word's index (the lowest on ties); 0 for an empty
     /// vocabulary.
     pub fn word(&self, d: &BinaryDescriptor) -> u32 {
-        let mut best = (u32::MAX, 0u32);
-        for (w, c) in self.words.iter().enumerate() {
-            let h = hamming(c, d);
-            if h < best.0 {
-                best = (h, w as u32);
-            }
-        }
-        best.1
+        nearest(&self.words, d)
     }
+}
+
+/// The index of the word nearest `d` (the lowest on ties; 0 when there are
+/// none).
+fn nearest(words: &[BinaryDescriptor], d: &BinaryDescriptor) -> u32 {
+    let mut best = (u32::MAX, 0u32);
+    for (w, c) in words.iter().enumerate() {
+        let h = hamming(c, d);
+        if h < best.0 {
+            best = (h, w as u32);
+        }
+    }
+    best.1
 }
 
 /// `k` of `data`, the first uniformly, each next with a chance
