@@ -1,16 +1,17 @@
 //! An ORB pass before SIFT, measured against the service's answers: a
 //! prototype of a cheap first look that would answer the easy queries
 //! without SIFT. Per query, on the service's 640 px frame: ORB (1000
-//! keypoints), each descriptor's binary word (`bowloc::vocabulary::binary`,
-//! K words by k-majority over the map's ORB descriptors, drawn with the
-//! SIFT vocabulary's seed), tf-idf votes over the map images, and the top 5
-//! verified by a similarity (RANSAC, 6 px) on word pairs (each query
-//! feature paired with the nearest map feature of its word, at most 64
-//! bits away). The pass answers with a verified candidate that has at
-//! least `floor` inliers at a scale within e^±`window` of the query's:
-//! either the one of those whose scale is nearest the query's
-//! (`NearestScale`), or the candidate with the most inliers when it
-//! qualifies (`MostInliers`); then the other candidates in vote order.
+//! keypoints, spread over a grid of cells, `ORB_PASS_GRID`), each
+//! descriptor's binary word (`bowloc::vocabulary::binary`, K words by
+//! k-majority over the map's ORB descriptors, drawn with the SIFT
+//! vocabulary's seed), tf-idf votes over the map images, and the top 10
+//! (`ORB_PASS_TOP`) verified by a similarity (RANSAC, 6 px, OpenCV's
+//! generator seeded per query) on word pairs (each query feature paired
+//! with the nearest map feature of its word, at most 64 bits away). A
+//! [`Setting`] says when the pass answers and with which verified
+//! candidate (its inliers, its scale against the query's, the places of
+//! the others); the answer lists that candidate, then the others in vote
+//! order.
 //!
 //! The SIFT map and vocabulary are given; they are loaded and searched as
 //! `bowloc serve` loads and searches them with its default configuration
@@ -23,10 +24,13 @@
 //! save against), the service's default, and the pass. A query the pass
 //! answers costs its decode and the pass; any other costs the pass (its
 //! decode left out: the service would decode once) and the default. It
-//! prints, per setting, the queries the pass answered, recall@1 and
-//! recall@5 against the full search's, and the median of the per-query
-//! ratios of the request time to the full search's, with the default alone
-//! beside it (docs/performance.md, "An ORB pass before SIFT").
+//! prints, for a few settings, the queries the pass answered, recall@1 and
+//! recall@5 against the full search's, the median of the per-query ratios
+//! of the request time to the full search's, with the default alone beside
+//! them, and the queries a setting gets wrong where the default is right;
+//! then one tab-separated `sweep` line for every setting of the sweep,
+//! which `scripts/orb-pass.sh` chooses from (docs/performance.md, "An ORB
+//! pass before SIFT").
 //!
 //! With a fourth argument EVERY, only every EVERY-th query is used (query
 //! numbers in the output count those), as `scripts/latency.sh` takes them.
@@ -51,26 +55,101 @@ use std::time::Instant;
 const ORB_FEATURES: i32 = 1000;
 const WORDS: usize = 1000;
 const ITERATIONS: usize = 8;
-const TOP: usize = 5;
+/// Candidates verified, in vote order (`ORB_PASS_TOP`, default 10).
+fn top() -> usize {
+    std::env::var("ORB_PASS_TOP")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(10)
+}
 /// The pass's settings: (pick, inlier floor, |ln scale| window).
-const SETTINGS: [(Pick, usize, f64); 6] = [
-    (Pick::NearestScale, 20, 0.1),
-    (Pick::NearestScale, 30, 0.1),
-    (Pick::MostInliers, 20, 0.05),
-    (Pick::MostInliers, 20, 0.1),
-    (Pick::MostInliers, 30, 0.1),
-    (Pick::MostInliers, 40, 0.1),
+const SETTINGS: [Setting; 5] = [
+    Setting::new(Pick::NearestScale { share: 0.0 }, 20, 0.1, 0.0),
+    Setting::new(Pick::NearestScale { share: 0.0 }, 15, 0.2, 0.0),
+    Setting::new(Pick::NearestScale { share: 0.7 }, 15, 0.2, 0.0),
+    Setting::new(Pick::NearestScale { share: 0.9 }, 20, 0.3, 0.0),
+    Setting::new(Pick::MostInliers, 20, 0.1, 0.0),
 ];
+/// The sweep's picks, inlier floors and windows (every combination).
+const SWEEP_PICKS: [Pick; 9] = [
+    Pick::Refined { share: 0.5 },
+    Pick::Refined { share: 0.7 },
+    Pick::Refined { share: 0.9 },
+    Pick::NearestScale { share: 0.0 },
+    Pick::NearestScale { share: 0.5 },
+    Pick::NearestScale { share: 0.7 },
+    Pick::NearestScale { share: 0.9 },
+    Pick::NearestScale { share: 1.0 },
+    Pick::MostInliers,
+];
+const SWEEP_FLOORS: [usize; 7] = [10, 12, 15, 20, 25, 30, 40];
+const SWEEP_WINDOWS: [f64; 5] = [0.05, 0.1, 0.15, 0.2, 0.3];
+const SWEEP_MARGINS: [f64; 3] = [0.0, 1.0, 1.25];
+/// Map images more than this many apart are other places (the sequence
+/// the map was taken in; gardens-point's ground truth tolerance).
+const PLACE_APART: usize = 2;
+
+/// One setting of the pass: which verified candidate it answers with, the
+/// inliers it needs, how far from the query's its scale may be
+/// (|ln s| ≤ `window`), and the margin over other places: the pick must
+/// have at least `margin` times the inliers of every verified candidate
+/// more than `PLACE_APART` map images away (0: no such check).
+#[derive(Debug, Clone, Copy)]
+struct Setting {
+    pick: Pick,
+    floor: usize,
+    window: f64,
+    margin: f64,
+}
+
+impl Setting {
+    /// How the output names it: `nearest-0.7 15, |ln s| <= 0.2, margin 0`.
+    fn label(self) -> String {
+        format!(
+            "{} {}, |ln s| <= {}, margin {}",
+            self.pick.name(),
+            self.floor,
+            self.window,
+            self.margin
+        )
+    }
+
+    const fn new(pick: Pick, floor: usize, window: f64, margin: f64) -> Self {
+        Self {
+            pick,
+            floor,
+            window,
+            margin,
+        }
+    }
+}
 
 /// Which verified candidate the pass answers with.
 #[derive(Debug, Clone, Copy)]
 enum Pick {
-    /// Of those with `floor` inliers within the window, the one whose
-    /// scale is nearest the query's.
-    NearestScale,
+    /// Of those with `floor` inliers within the window and at least
+    /// `share` of the most inliers among them, the one whose scale is
+    /// nearest the query's.
+    NearestScale { share: f64 },
     /// The one with the most inliers, if it has `floor` and its scale is
     /// within the window.
     MostInliers,
+    /// The place of the one with the most inliers, refined by scale: of it
+    /// and the verified candidates within `PLACE_APART` map images of it
+    /// with at least `share` of its inliers, the one whose scale is nearest
+    /// the query's, if it has `floor` and its scale is within the window.
+    Refined { share: f64 },
+}
+
+impl Pick {
+    /// A short name for tables: `nearest-0.7`, `most`.
+    fn name(self) -> String {
+        match self {
+            Pick::NearestScale { share } => format!("nearest-{share}"),
+            Pick::MostInliers => "most".into(),
+            Pick::Refined { share } => format!("refined-{share}"),
+        }
+    }
 }
 
 /// One image's ORB keypoint centres and descriptors.
@@ -94,7 +173,15 @@ fn orb_of(
     let (mat, _) = frame.parts();
     let t = Instant::now();
     let (mut keys, mut raw) = (Vector::<KeyPoint>::new(), Mat::default());
-    detector.detect_and_compute(mat, &no_array(), &mut keys, &mut raw, false)?;
+    match grid() {
+        None => detector.detect_and_compute(mat, &no_array(), &mut keys, &mut raw, false)?,
+        Some((cols, rows)) => {
+            let mut all = Vector::<KeyPoint>::new();
+            detector.detect(mat, &mut all, &no_array())?;
+            keys = spread(&all, cols, rows, mat.cols() as f32, mat.rows() as f32);
+            detector.compute(mat, &mut keys, &mut raw)?;
+        }
+    }
     let descriptors = if raw.empty() {
         Vec::new()
     } else {
@@ -107,9 +194,42 @@ fn orb_of(
     Ok((orb, decode_ms, t.elapsed().as_secs_f64() * 1e3))
 }
 
+/// The cells keypoints are spread over (`ORB_PASS_GRID=COLSxROWS`, default
+/// 4x3): ORB detects four times as many corners and the strongest of each
+/// cell are kept, so the keypoints cover the frame. `ORB_PASS_GRID=none`:
+/// ORB's own strongest corners, wherever they are.
+fn grid() -> Option<(usize, usize)> {
+    let v = std::env::var("ORB_PASS_GRID").unwrap_or_else(|_| "4x3".into());
+    let (c, r) = v.split_once('x')?;
+    Some((c.parse().ok()?, r.parse().ok()?)).filter(|&(c, r)| c * r > 0)
+}
+
+/// The strongest keypoints of each of `cols`×`rows` cells, an equal share
+/// of `ORB_FEATURES` each.
+fn spread(all: &Vector<KeyPoint>, cols: usize, rows: usize, w: f32, h: f32) -> Vector<KeyPoint> {
+    let mut cells: Vec<Vec<KeyPoint>> = vec![Vec::new(); cols * rows];
+    for k in all.iter() {
+        let c = ((k.pt().x / w * cols as f32) as usize).min(cols - 1);
+        let r = ((k.pt().y / h * rows as f32) as usize).min(rows - 1);
+        cells[r * cols + c].push(k);
+    }
+    let share = ORB_FEATURES as usize / (cols * rows);
+    let mut kept = Vector::<KeyPoint>::new();
+    for mut cell in cells {
+        cell.sort_by(|a, b| b.response().total_cmp(&a.response()));
+        cell.into_iter().take(share).for_each(|k| kept.push(k));
+    }
+    kept
+}
+
 fn detector() -> anyhow::Result<opencv::core::Ptr<ORB>> {
+    let features = if grid().is_some() {
+        4 * ORB_FEATURES
+    } else {
+        ORB_FEATURES
+    };
     Ok(ORB::create(
-        ORB_FEATURES,
+        features,
         1.2,
         8,
         31,
@@ -243,17 +363,26 @@ struct Pass {
 }
 
 impl Pass {
-    /// The pass's answer under (pick, floor, window), if it answers: that
-    /// candidate, then the others in vote order.
-    fn answer(&self, pick: Pick, floor: usize, window: f64) -> Option<Vec<usize>> {
+    /// The pass's answer under a setting, if it answers: that candidate,
+    /// then the others in vote order.
+    fn answer(&self, setting: Setting) -> Option<Vec<usize>> {
+        let Setting {
+            pick,
+            floor,
+            window,
+            margin,
+        } = setting;
         let scale_gap = |s: f64| if s > 0.0 { s.ln().abs() } else { f64::INFINITY };
         let fits = |v: &&(usize, f64, usize)| v.0 >= floor && scale_gap(v.1) <= window;
         let best = match pick {
-            Pick::NearestScale => self
-                .verified
-                .iter()
-                .filter(fits)
-                .min_by(|a, b| scale_gap(a.1).total_cmp(&scale_gap(b.1)))?,
+            Pick::NearestScale { share } => {
+                let strongest = self.verified.iter().filter(fits).map(|v| v.0).max()?;
+                self.verified
+                    .iter()
+                    .filter(fits)
+                    .filter(|v| v.0 as f64 >= share * strongest as f64)
+                    .min_by(|a, b| scale_gap(a.1).total_cmp(&scale_gap(b.1)))?
+            }
             Pick::MostInliers => self
                 .verified
                 .iter()
@@ -262,7 +391,29 @@ impl Pass {
                         .then(scale_gap(b.1).total_cmp(&scale_gap(a.1)))
                 })
                 .filter(fits)?,
+            Pick::Refined { share } => {
+                let strongest = self.verified.iter().max_by(|a, b| {
+                    a.0.cmp(&b.0)
+                        .then(scale_gap(b.1).total_cmp(&scale_gap(a.1)))
+                })?;
+                self.verified
+                    .iter()
+                    .filter(|v| v.2.abs_diff(strongest.2) <= PLACE_APART)
+                    .filter(|v| v.0 as f64 >= share * strongest.0 as f64)
+                    .min_by(|a, b| scale_gap(a.1).total_cmp(&scale_gap(b.1)))
+                    .filter(fits)?
+            }
         };
+        let other_place = self
+            .verified
+            .iter()
+            .filter(|v| v.2.abs_diff(best.2) > PLACE_APART)
+            .map(|v| v.0)
+            .max()
+            .unwrap_or(0);
+        if (best.0 as f64) < margin * other_place as f64 {
+            return None;
+        }
         let rest = self.verified.iter().filter(|v| v.2 != best.2);
         Some(std::iter::once(best.2).chain(rest.map(|v| v.2)).collect())
     }
@@ -369,8 +520,11 @@ fn main() -> anyhow::Result<()> {
             .iter()
             .map(|d| vocabulary.word(d))
             .collect();
+        // RANSAC draws from OpenCV's generator: seeded per query, so the
+        // pass's answer does not depend on what ran before it
+        opencv::core::set_rng_seed(q as i32 + 1)?;
         let verified = orb_map
-            .top(&words, TOP)
+            .top(&words, top())
             .into_iter()
             .map(|m| orb_map.verify(&query, &words, m).map(|(n, s)| (n, s, m)))
             .collect::<anyhow::Result<Vec<_>>>()?;
@@ -383,11 +537,12 @@ fn main() -> anyhow::Result<()> {
 
     let cpu = Cpu::here();
     println!(
-        "{}: {} queries, {} map images; SIFT K = {}, vocabulary seed {seed}; ORB {ORB_FEATURES} features, K = {WORDS}, top {TOP} verified; {} ({}, {} CPUs), one thread",
+        "{}: {} queries, {} map images; SIFT K = {}, vocabulary seed {seed}; ORB {ORB_FEATURES} features, K = {WORDS}, top {} verified; {} ({}, {} CPUs), one thread",
         dataset.name,
         dataset.queries.len(),
         dataset.map.len(),
         localizer.vocab.words(),
+        top(),
         cpu.model,
         cpu.instruction_set,
         cpu.cpus
@@ -408,7 +563,9 @@ fn main() -> anyhow::Result<()> {
         percent(full_5),
         median(rows.iter().map(|r| r.2.1).collect())
     );
-    let report = |label: &str, answers: &dyn Fn(usize) -> (Vec<usize>, f64), answered: usize| {
+    // recall@1, recall@5 (queries) and the median request time and
+    // per-query ratio to the full search of a list of answers
+    let outcome = |answers: &dyn Fn(usize) -> (Vec<usize>, f64)| {
         let at_1 = count(&|q| recall(&answers(q).0, q, 1));
         let at_5 = count(&|q| recall(&answers(q).0, q, 5));
         let ratio = median(
@@ -418,6 +575,23 @@ fn main() -> anyhow::Result<()> {
                 .collect(),
         );
         let times = median((0..rows.len()).map(|q| answers(q).1).collect());
+        (at_1, at_5, times, ratio)
+    };
+    // a query the pass answers costs its decode and the pass; any other
+    // the pass and the default
+    let rows = &rows;
+    let with_pass = |setting: Setting| {
+        move |q: usize| {
+            let (pass, decode_ms, _, service) = &rows[q];
+            match pass.answer(setting) {
+                Some(ids) => (ids, decode_ms + pass.ms),
+                None => (service.0.clone(), pass.ms + service.1),
+            }
+        }
+    };
+    let answered = |setting: Setting| count(&|q| rows[q].0.answer(setting).is_some());
+    let report = |label: &str, answers: &dyn Fn(usize) -> (Vec<usize>, f64), answered: usize| {
+        let (at_1, at_5, times, ratio) = outcome(answers);
         println!(
             "{label:32} answered by the pass {answered:3}; recall@1 {:.1} ({:+.1}), recall@5 {:.1} ({:+.1}); median {times:.1} ms, median ratio to the full search {ratio:.3}",
             percent(at_1),
@@ -426,24 +600,14 @@ fn main() -> anyhow::Result<()> {
             percent(at_5) - percent(full_5),
         );
     };
-    report("default alone", &|q| rows[q].3.clone(), 0);
-    for (pick, floor, window) in SETTINGS {
-        let answered = count(&|q| rows[q].0.answer(pick, floor, window).is_some());
-        report(
-            &format!("{pick:?} {floor}, |ln s| <= {window}"),
-            &|q| {
-                let (pass, decode_ms, _, service) = &rows[q];
-                match pass.answer(pick, floor, window) {
-                    Some(ids) => (ids, decode_ms + pass.ms),
-                    None => (service.0.clone(), pass.ms + service.1),
-                }
-            },
-            answered,
-        );
+    let default_alone = |q: usize| rows[q].3.clone();
+    report("default alone", &default_alone, 0);
+    for setting in SETTINGS {
+        report(&setting.label(), &with_pass(setting), answered(setting));
         // where the pass's answer is wrong and the default's right
         let lost: Vec<String> = (0..rows.len())
             .filter_map(|q| {
-                let ids = rows[q].0.answer(pick, floor, window)?;
+                let ids = rows[q].0.answer(setting)?;
                 (!recall(&ids, q, 1) && recall(&rows[q].3.0, q, 1))
                     .then(|| format!("{q}→{}", ids[0]))
             })
@@ -453,6 +617,35 @@ fn main() -> anyhow::Result<()> {
             "",
             lost.join(" ")
         );
+    }
+    // every setting of the sweep, one tab-separated line each: recall
+    // changes in points against the full search and against the default
+    // alone, and the median per-query ratio (scripts/orb-pass.sh chooses
+    // from these)
+    let (default_1, default_5, _, _) = outcome(&default_alone);
+    println!(
+        "sweep\tdataset\tseed\tpick\tfloor\twindow\tmargin\tanswered\trecall@1 vs full\trecall@5 vs full\trecall@1 vs default\trecall@5 vs default\tratio"
+    );
+    for pick in SWEEP_PICKS {
+        for floor in SWEEP_FLOORS {
+            for window in SWEEP_WINDOWS {
+                for margin in SWEEP_MARGINS {
+                    let setting = Setting::new(pick, floor, window, margin);
+                    let (at_1, at_5, _, ratio) = outcome(&with_pass(setting));
+                    let points = |a: usize, b: usize| percent(a) - percent(b);
+                    println!(
+                        "sweep\t{}\t{seed}\t{}\t{floor}\t{window}\t{margin}\t{}\t{:+.1}\t{:+.1}\t{:+.1}\t{:+.1}\t{ratio:.3}",
+                        dataset.name,
+                        pick.name(),
+                        answered(setting),
+                        points(at_1, full_1),
+                        points(at_5, full_5),
+                        points(at_1, default_1),
+                        points(at_5, default_5),
+                    );
+                }
+            }
+        }
     }
     println!(
         "the pass alone: median {:.2} ms after a decode of {:.2} ms",
