@@ -63,12 +63,16 @@ fn top() -> usize {
         .unwrap_or(10)
 }
 /// The pass's settings: (pick, inlier floor, |ln scale| window).
-const SETTINGS: [Setting; 5] = [
+const SETTINGS: [Setting; 6] = [
     Setting::new(Pick::NearestScale { share: 0.0 }, 20, 0.1, 0.0),
     Setting::new(Pick::NearestScale { share: 0.0 }, 15, 0.2, 0.0),
     Setting::new(Pick::NearestScale { share: 0.7 }, 15, 0.2, 0.0),
     Setting::new(Pick::NearestScale { share: 0.9 }, 20, 0.3, 0.0),
     Setting::new(Pick::MostInliers, 20, 0.1, 0.0),
+    Setting {
+        agree: true,
+        ..Setting::new(Pick::NearestScale { share: 0.7 }, 10, 0.2, 0.0)
+    },
 ];
 /// The sweep's picks, inlier floors and windows (every combination).
 const SWEEP_PICKS: [Pick; 9] = [
@@ -93,24 +97,29 @@ const PLACE_APART: usize = 2;
 /// inliers it needs, how far from the query's its scale may be
 /// (|ln s| ≤ `window`), and the margin over other places: the pick must
 /// have at least `margin` times the inliers of every verified candidate
-/// more than `PLACE_APART` map images away (0: no such check).
+/// more than `PLACE_APART` map images away (0: no such check); with
+/// `agree`, the pick must also lie within `PLACE_APART` map images of the
+/// votes' first candidate.
 #[derive(Debug, Clone, Copy)]
 struct Setting {
     pick: Pick,
     floor: usize,
     window: f64,
     margin: f64,
+    agree: bool,
 }
 
 impl Setting {
-    /// How the output names it: `nearest-0.7 15, |ln s| <= 0.2, margin 0`.
+    /// How the output names it: `nearest-0.7 15, |ln s| <= 0.2, margin 0`
+    /// (and `, agree`).
     fn label(self) -> String {
         format!(
-            "{} {}, |ln s| <= {}, margin {}",
+            "{} {}, |ln s| <= {}, margin {}{}",
             self.pick.name(),
             self.floor,
             self.window,
-            self.margin
+            self.margin,
+            if self.agree { ", agree" } else { "" }
         )
     }
 
@@ -120,6 +129,7 @@ impl Setting {
             floor,
             window,
             margin,
+            agree: false,
         }
     }
 }
@@ -371,6 +381,7 @@ impl Pass {
             floor,
             window,
             margin,
+            agree,
         } = setting;
         let scale_gap = |s: f64| if s > 0.0 { s.ln().abs() } else { f64::INFINITY };
         let fits = |v: &&(usize, f64, usize)| v.0 >= floor && scale_gap(v.1) <= window;
@@ -412,6 +423,9 @@ impl Pass {
             .max()
             .unwrap_or(0);
         if (best.0 as f64) < margin * other_place as f64 {
+            return None;
+        }
+        if agree && best.2.abs_diff(self.verified.first()?.2) > PLACE_APART {
             return None;
         }
         let rest = self.verified.iter().filter(|v| v.2 != best.2);
@@ -553,33 +567,25 @@ fn main() -> anyhow::Result<()> {
             .take(n)
             .any(|&m| dataset.truth[q].contains(&(m as u32)))
     };
-    let percent = |hits: usize| 100.0 * hits as f64 / rows.len() as f64;
-    let count = |f: &dyn Fn(usize) -> bool| (0..rows.len()).filter(|&q| f(q)).count();
-    let full_1 = count(&|q| recall(&rows[q].2.0, q, 1));
-    let full_5 = count(&|q| recall(&rows[q].2.0, q, 5));
-    println!(
-        "full search: recall@1 {:.1}, recall@5 {:.1}, median {:.1} ms",
-        percent(full_1),
-        percent(full_5),
-        median(rows.iter().map(|r| r.2.1).collect())
-    );
-    // recall@1, recall@5 (queries) and the median request time and
-    // per-query ratio to the full search of a list of answers
-    let outcome = |answers: &dyn Fn(usize) -> (Vec<usize>, f64)| {
-        let at_1 = count(&|q| recall(&answers(q).0, q, 1));
-        let at_5 = count(&|q| recall(&answers(q).0, q, 5));
-        let ratio = median(
-            rows.iter()
-                .enumerate()
-                .map(|(q, r)| answers(q).1 / r.2.1)
-                .collect(),
-        );
-        let times = median((0..rows.len()).map(|q| answers(q).1).collect());
-        (at_1, at_5, times, ratio)
+    let rows = &rows;
+    let every: Vec<usize> = (0..rows.len()).collect();
+    // over the queries `qs`: recall@1 and recall@5 (%), the median request
+    // time and the median per-query ratio to the full search's
+    let outcome = |qs: &[usize], answers: &dyn Fn(usize) -> (Vec<usize>, f64)| {
+        let share = |n: usize| {
+            let hits = qs.iter().filter(|&&q| recall(&answers(q).0, q, n)).count();
+            100.0 * hits as f64 / qs.len() as f64
+        };
+        let times = median(qs.iter().map(|&q| answers(q).1).collect());
+        let ratio = median(qs.iter().map(|&q| answers(q).1 / rows[q].2.1).collect());
+        (share(1), share(5), times, ratio)
     };
+    let full_alone = |q: usize| rows[q].2.clone();
+    let default_alone = |q: usize| rows[q].3.clone();
+    let (full_1, full_5, full_ms, _) = outcome(&every, &full_alone);
+    println!("full search: recall@1 {full_1:.1}, recall@5 {full_5:.1}, median {full_ms:.1} ms");
     // a query the pass answers costs its decode and the pass; any other
     // the pass and the default
-    let rows = &rows;
     let with_pass = |setting: Setting| {
         move |q: usize| {
             let (pass, decode_ms, _, service) = &rows[q];
@@ -589,21 +595,26 @@ fn main() -> anyhow::Result<()> {
             }
         }
     };
-    let answered = |setting: Setting| count(&|q| rows[q].0.answer(setting).is_some());
+    let answered = |qs: &[usize], setting: Setting| {
+        qs.iter()
+            .filter(|&&q| rows[q].0.answer(setting).is_some())
+            .count()
+    };
     let report = |label: &str, answers: &dyn Fn(usize) -> (Vec<usize>, f64), answered: usize| {
-        let (at_1, at_5, times, ratio) = outcome(answers);
+        let (at_1, at_5, times, ratio) = outcome(&every, answers);
         println!(
-            "{label:32} answered by the pass {answered:3}; recall@1 {:.1} ({:+.1}), recall@5 {:.1} ({:+.1}); median {times:.1} ms, median ratio to the full search {ratio:.3}",
-            percent(at_1),
-            percent(at_1) - percent(full_1),
-            percent(at_5),
-            percent(at_5) - percent(full_5),
+            "{label:32} answered by the pass {answered:3}; recall@1 {at_1:.1} ({:+.1}), recall@5 {at_5:.1} ({:+.1}); median {times:.1} ms, median ratio to the full search {ratio:.3}",
+            at_1 - full_1,
+            at_5 - full_5,
         );
     };
-    let default_alone = |q: usize| rows[q].3.clone();
     report("default alone", &default_alone, 0);
     for setting in SETTINGS {
-        report(&setting.label(), &with_pass(setting), answered(setting));
+        report(
+            &setting.label(),
+            &with_pass(setting),
+            answered(&every, setting),
+        );
         // where the pass's answer is wrong and the default's right
         let lost: Vec<String> = (0..rows.len())
             .filter_map(|q| {
@@ -618,31 +629,46 @@ fn main() -> anyhow::Result<()> {
             lost.join(" ")
         );
     }
-    // every setting of the sweep, one tab-separated line each: recall
-    // changes in points against the full search and against the default
-    // alone, and the median per-query ratio (scripts/orb-pass.sh chooses
-    // from these)
-    let (default_1, default_5, _, _) = outcome(&default_alone);
+    // every setting of the sweep, one tab-separated line each, over all
+    // the queries and over the even and the odd ones (0, 2, 4, … and 1, 3,
+    // 5, …): recall changes in points against the full search and against
+    // the default alone, and the median per-query ratio
+    // (scripts/orb-pass.sh chooses from these, on one part or dataset, and
+    // checks on another)
     println!(
-        "sweep\tdataset\tseed\tpick\tfloor\twindow\tmargin\tanswered\trecall@1 vs full\trecall@5 vs full\trecall@1 vs default\trecall@5 vs default\tratio"
+        "sweep\tdataset\tseed\tpart\tpick\tfloor\twindow\tmargin\tagree\tanswered\trecall@1 vs full\trecall@5 vs full\trecall@1 vs default\trecall@5 vs default\tratio"
     );
-    for pick in SWEEP_PICKS {
-        for floor in SWEEP_FLOORS {
-            for window in SWEEP_WINDOWS {
-                for margin in SWEEP_MARGINS {
-                    let setting = Setting::new(pick, floor, window, margin);
-                    let (at_1, at_5, _, ratio) = outcome(&with_pass(setting));
-                    let points = |a: usize, b: usize| percent(a) - percent(b);
-                    println!(
-                        "sweep\t{}\t{seed}\t{}\t{floor}\t{window}\t{margin}\t{}\t{:+.1}\t{:+.1}\t{:+.1}\t{:+.1}\t{ratio:.3}",
-                        dataset.name,
-                        pick.name(),
-                        answered(setting),
-                        points(at_1, full_1),
-                        points(at_5, full_5),
-                        points(at_1, default_1),
-                        points(at_5, default_5),
-                    );
+    let parts = [
+        ("all", every.clone()),
+        ("even", every.iter().copied().step_by(2).collect::<Vec<_>>()),
+        ("odd", every.iter().copied().skip(1).step_by(2).collect()),
+    ];
+    for (part, qs) in &parts {
+        let (full_1, full_5, _, _) = outcome(qs, &full_alone);
+        let (default_1, default_5, _, _) = outcome(qs, &default_alone);
+        for pick in SWEEP_PICKS {
+            for floor in SWEEP_FLOORS {
+                for window in SWEEP_WINDOWS {
+                    for (margin, agree) in SWEEP_MARGINS
+                        .into_iter()
+                        .flat_map(|m| [(m, false), (m, true)])
+                    {
+                        let setting = Setting {
+                            agree,
+                            ..Setting::new(pick, floor, window, margin)
+                        };
+                        let (at_1, at_5, _, ratio) = outcome(qs, &with_pass(setting));
+                        println!(
+                            "sweep\t{}\t{seed}\t{part}\t{}\t{floor}\t{window}\t{margin}\t{agree}\t{}\t{:+.1}\t{:+.1}\t{:+.1}\t{:+.1}\t{ratio:.3}",
+                            dataset.name,
+                            pick.name(),
+                            answered(qs, setting),
+                            at_1 - full_1,
+                            at_5 - full_5,
+                            at_1 - default_1,
+                            at_5 - default_5,
+                        );
+                    }
                 }
             }
         }
