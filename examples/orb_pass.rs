@@ -27,7 +27,9 @@
 //! prints, for a few settings, the queries the pass answered, recall@1 and
 //! recall@5 against the full search's, the median of the per-query ratios
 //! of the request time to the full search's, with the default alone beside
-//! them, and the queries a setting gets wrong where the default is right;
+//! them (and the ratio of the medians, the figure `scripts/latency.sh`
+//! leads with), and the queries a setting gets wrong where the default is
+//! right;
 //! then one tab-separated `sweep` line for every setting of the sweep,
 //! which `scripts/orb-pass.sh` chooses from (docs/performance.md, "An ORB
 //! pass before SIFT").
@@ -603,9 +605,10 @@ fn main() -> anyhow::Result<()> {
     let report = |label: &str, answers: &dyn Fn(usize) -> (Vec<usize>, f64), answered: usize| {
         let (at_1, at_5, times, ratio) = outcome(&every, answers);
         println!(
-            "{label:32} answered by the pass {answered:3}; recall@1 {at_1:.1} ({:+.1}), recall@5 {at_5:.1} ({:+.1}); median {times:.1} ms, median ratio to the full search {ratio:.3}",
+            "{label:32} answered by the pass {answered:3}; recall@1 {at_1:.1} ({:+.1}), recall@5 {at_5:.1} ({:+.1}); median {times:.1} ms, ratio of medians {:.3}, median ratio to the full search {ratio:.3}",
             at_1 - full_1,
             at_5 - full_5,
+            times / full_ms,
         );
     };
     report("default alone", &default_alone, 0);
