@@ -64,7 +64,8 @@ fn top() -> usize {
         .and_then(|v| v.parse().ok())
         .unwrap_or(10)
 }
-/// The pass's settings: (pick, inlier floor, |ln scale| window).
+/// The settings printed in full, each with the queries it gets wrong where
+/// the default is right (the sweep prints every setting in one line).
 const SETTINGS: [Setting; 6] = [
     Setting::new(Pick::NearestScale { share: 0.0 }, 20, 0.1, 0.0),
     Setting::new(Pick::NearestScale { share: 0.0 }, 15, 0.2, 0.0),
@@ -76,7 +77,8 @@ const SETTINGS: [Setting; 6] = [
         ..Setting::new(Pick::NearestScale { share: 0.7 }, 10, 0.2, 0.0)
     },
 ];
-/// The sweep's picks, inlier floors and windows (every combination).
+/// The sweep's picks, inlier floors, windows and margins, each with and
+/// without `agree` (every combination: 1890 settings).
 const SWEEP_PICKS: [Pick; 9] = [
     Pick::Refined { share: 0.5 },
     Pick::Refined { share: 0.7 },
