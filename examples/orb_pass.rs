@@ -58,11 +58,15 @@ const ORB_FEATURES: i32 = 1000;
 const WORDS: usize = 1000;
 const ITERATIONS: usize = 8;
 /// Candidates verified, in vote order (`ORB_PASS_TOP`, default 10).
-fn top() -> usize {
-    std::env::var("ORB_PASS_TOP")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(10)
+fn top_from_env() -> anyhow::Result<usize> {
+    match std::env::var("ORB_PASS_TOP") {
+        Err(_) => Ok(10),
+        Ok(v) => v
+            .parse()
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(|| anyhow::anyhow!("ORB_PASS_TOP={v}: want a positive count")),
+    }
 }
 /// The settings printed in full, each with the queries it gets wrong where
 /// the default is right (the sweep prints every setting in one line).
@@ -178,7 +182,7 @@ struct Orb {
 fn orb_of(
     bytes: &[u8],
     config: &ExtractConfig,
-    detector: &mut opencv::core::Ptr<ORB>,
+    detector: &mut Detector,
 ) -> anyhow::Result<(Orb, f64, f64)> {
     let t = Instant::now();
     let image = decode(bytes, DecodeLimits::default(), config.max_side)?;
@@ -187,13 +191,14 @@ fn orb_of(
     let (mat, _) = frame.parts();
     let t = Instant::now();
     let (mut keys, mut raw) = (Vector::<KeyPoint>::new(), Mat::default());
-    match grid() {
-        None => detector.detect_and_compute(mat, &no_array(), &mut keys, &mut raw, false)?,
+    let orb = &mut detector.orb;
+    match detector.grid {
+        None => orb.detect_and_compute(mat, &no_array(), &mut keys, &mut raw, false)?,
         Some((cols, rows)) => {
             let mut all = Vector::<KeyPoint>::new();
-            detector.detect(mat, &mut all, &no_array())?;
+            orb.detect(mat, &mut all, &no_array())?;
             keys = spread(&all, cols, rows, mat.cols() as f32, mat.rows() as f32);
-            detector.compute(mat, &mut keys, &mut raw)?;
+            orb.compute(mat, &mut keys, &mut raw)?;
         }
     }
     let descriptors = if raw.empty() {
@@ -212,10 +217,16 @@ fn orb_of(
 /// 4x3): ORB detects four times as many corners and the strongest of each
 /// cell are kept, so the keypoints cover the frame. `ORB_PASS_GRID=none`:
 /// ORB's own strongest corners, wherever they are.
-fn grid() -> Option<(usize, usize)> {
+fn grid_from_env() -> anyhow::Result<Option<(usize, usize)>> {
     let v = std::env::var("ORB_PASS_GRID").unwrap_or_else(|_| "4x3".into());
-    let (c, r) = v.split_once('x')?;
-    Some((c.parse().ok()?, r.parse().ok()?)).filter(|&(c, r)| c * r > 0)
+    if v == "none" {
+        return Ok(None);
+    }
+    v.split_once('x')
+        .and_then(|(c, r)| Some((c.parse().ok()?, r.parse().ok()?)))
+        .filter(|&(c, r): &(usize, usize)| c * r > 0 && c * r <= ORB_FEATURES as usize)
+        .map(Some)
+        .ok_or_else(|| anyhow::anyhow!("ORB_PASS_GRID={v}: want COLSxROWS or none"))
 }
 
 /// The strongest keypoints of each of `cols`×`rows` cells, an equal share
@@ -236,23 +247,33 @@ fn spread(all: &Vector<KeyPoint>, cols: usize, rows: usize, w: f32, h: f32) -> V
     kept
 }
 
-fn detector() -> anyhow::Result<opencv::core::Ptr<ORB>> {
-    let features = if grid().is_some() {
-        4 * ORB_FEATURES
-    } else {
-        ORB_FEATURES
-    };
-    Ok(ORB::create(
-        features,
-        1.2,
-        8,
-        31,
-        0,
-        2,
-        ORB_ScoreType::HARRIS_SCORE,
-        31,
-        20,
-    )?)
+/// An ORB detector and the grid its keypoints are spread over.
+struct Detector {
+    orb: opencv::core::Ptr<ORB>,
+    grid: Option<(usize, usize)>,
+}
+
+impl Detector {
+    fn new(grid: Option<(usize, usize)>) -> anyhow::Result<Self> {
+        // four times the corners when the grid picks among them
+        let features = if grid.is_some() {
+            4 * ORB_FEATURES
+        } else {
+            ORB_FEATURES
+        };
+        let orb = ORB::create(
+            features,
+            1.2,
+            8,
+            31,
+            0,
+            2,
+            ORB_ScoreType::HARRIS_SCORE,
+            31,
+            20,
+        )?;
+        Ok(Self { orb, grid })
+    }
 }
 
 /// tf-idf of a word list: (word, weight) sorted by word, L2-normalised.
@@ -389,6 +410,13 @@ impl Pass {
         } = setting;
         let scale_gap = |s: f64| if s > 0.0 { s.ln().abs() } else { f64::INFINITY };
         let fits = |v: &&(usize, f64, usize)| v.0 >= floor && scale_gap(v.1) <= window;
+        // the most inliers, the nearer scale on ties
+        let strongest = || {
+            self.verified.iter().max_by(|a, b| {
+                a.0.cmp(&b.0)
+                    .then(scale_gap(b.1).total_cmp(&scale_gap(a.1)))
+            })
+        };
         let best = match pick {
             Pick::NearestScale { share } => {
                 let strongest = self.verified.iter().filter(fits).map(|v| v.0).max()?;
@@ -398,19 +426,9 @@ impl Pass {
                     .filter(|v| v.0 as f64 >= share * strongest as f64)
                     .min_by(|a, b| scale_gap(a.1).total_cmp(&scale_gap(b.1)))?
             }
-            Pick::MostInliers => self
-                .verified
-                .iter()
-                .max_by(|a, b| {
-                    a.0.cmp(&b.0)
-                        .then(scale_gap(b.1).total_cmp(&scale_gap(a.1)))
-                })
-                .filter(fits)?,
+            Pick::MostInliers => strongest().filter(fits)?,
             Pick::Refined { share } => {
-                let strongest = self.verified.iter().max_by(|a, b| {
-                    a.0.cmp(&b.0)
-                        .then(scale_gap(b.1).total_cmp(&scale_gap(a.1)))
-                })?;
+                let strongest = strongest()?;
                 self.verified
                     .iter()
                     .filter(|v| v.2.abs_diff(strongest.2) <= PLACE_APART)
@@ -451,6 +469,7 @@ fn main() -> anyhow::Result<()> {
     // scripts/latency.sh takes them
     let every: usize = rest.first().map_or(Ok(1), |s| s.parse())?;
     anyhow::ensure!(every > 0, "EVERY must be at least 1");
+    let (grid, top) = (grid_from_env()?, top_from_env()?);
     // as the binary does: image buffers kept mapped, one OpenCV thread
     bowloc::features::keep_image_buffers();
     bowloc::features::set_opencv_threads(1);
@@ -477,7 +496,7 @@ fn main() -> anyhow::Result<()> {
     let map_orb: Vec<Orb> = dataset
         .map
         .par_iter()
-        .map(|r| Ok(orb_of(&read(r)?, &localizer.extract, &mut detector()?)?.0))
+        .map(|r| Ok(orb_of(&read(r)?, &localizer.extract, &mut Detector::new(grid)?)?.0))
         .collect::<anyhow::Result<_>>()?;
     let all: Vec<BinaryDescriptor> = map_orb.iter().flat_map(|m| m.descriptors.clone()).collect();
     let vocabulary = BinaryVocabulary::train(&all, WORDS, ITERATIONS, seed);
@@ -488,7 +507,7 @@ fn main() -> anyhow::Result<()> {
         min_features: 0,
         ..default.clone()
     };
-    let mut orb = detector()?;
+    let mut orb = Detector::new(grid)?;
     // the service learns its plan from the requests it answers: one round
     // of every query first, as a server that has been answering a while
     for (q, r) in dataset.queries.iter().enumerate() {
@@ -542,7 +561,7 @@ fn main() -> anyhow::Result<()> {
         // pass's answer does not depend on what ran before it
         opencv::core::set_rng_seed(q as i32 + 1)?;
         let verified = orb_map
-            .top(&words, top())
+            .top(&words, top)
             .into_iter()
             .map(|m| orb_map.verify(&query, &words, m).map(|(n, s)| (n, s, m)))
             .collect::<anyhow::Result<Vec<_>>>()?;
@@ -560,7 +579,7 @@ fn main() -> anyhow::Result<()> {
         dataset.queries.len(),
         dataset.map.len(),
         localizer.vocab.words(),
-        top(),
+        top,
         cpu.model,
         cpu.instruction_set,
         cpu.cpus
@@ -576,12 +595,14 @@ fn main() -> anyhow::Result<()> {
     // over the queries `qs`: recall@1 and recall@5 (%), the median request
     // time and the median per-query ratio to the full search's
     let outcome = |qs: &[usize], answers: &dyn Fn(usize) -> (Vec<usize>, f64)| {
+        let answers: Vec<(usize, (Vec<usize>, f64))> =
+            qs.iter().map(|&q| (q, answers(q))).collect();
         let share = |n: usize| {
-            let hits = qs.iter().filter(|&&q| recall(&answers(q).0, q, n)).count();
+            let hits = answers.iter().filter(|(q, a)| recall(&a.0, *q, n)).count();
             100.0 * hits as f64 / qs.len() as f64
         };
-        let times = median(qs.iter().map(|&q| answers(q).1).collect());
-        let ratio = median(qs.iter().map(|&q| answers(q).1 / rows[q].2.1).collect());
+        let times = median(answers.iter().map(|(_, a)| a.1).collect());
+        let ratio = median(answers.iter().map(|(q, a)| a.1 / rows[*q].2.1).collect());
         (share(1), share(5), times, ratio)
     };
     let full_alone = |q: usize| rows[q].2.clone();

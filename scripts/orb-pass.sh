@@ -60,16 +60,21 @@ fi
 # worst ratio-to-bar there; then how many hold on the sets checked on
 # (every seed: recall within 1 point of the full search, or of the
 # default alone, and the ratio within the bar), and the fastest there.
+# what both awk programs below read a sweep line by: the setting's name
+# and the dataset's bar
+settings_awk='
+  function setting() { return $5 " floor " $6 " window " $7 " margin " $8 ($9 == "true" ? " agree" : "") }
+  function bar() { return ($2 == "gardens-point") ? 0.6 : 0.5 }'
 choose() {
   local on=$1 other=$2
   echo "chosen on $on (at most $loss points of recall@1 and of recall@5 lost against the default alone on every seed; within 0.01 of the lowest worst ratio to the bar), checked on $other (held out):"
   local out
-  out=$(awk -F'\t' -v on=" $on " -v other=" $other " -v loss="$loss" '
+  out=$(awk -F'\t' -v on=" $on " -v other=" $other " -v loss="$loss" "$settings_awk"'
     function worse(a, k, v) { if (!(k in a) || v < a[k]) a[k] = v }
     function slower(a, k, v) { if (!(k in a) || v > a[k]) a[k] = v }
-    { key = $5 " floor " $6 " window " $7 " margin " $8 ($9 == "true" ? " agree" : "")
+    { key = setting()
       set = " " $2 "/" $4 " "
-      to_bar = $15 / (($2 == "gardens-point") ? 0.6 : 0.5)
+      to_bar = $15 / bar()
       if (index(on, set)) {
         worse(low, key, $13); worse(low, key, $14); slower(slow, key, to_bar)
       } else if (index(other, set)) {
@@ -100,13 +105,12 @@ for loss in $losses; do
 done
 # the bar on both datasets at once (all queries, every seed)
 echo "settings within the bar on both datasets, every seed (all queries):"
-awk -F'\t' '
-  $4 == "all" { key = $5 " floor " $6 " window " $7 " margin " $8 ($9 == "true" ? " agree" : "")
-    bar = ($2 == "gardens-point") ? 0.6 : 0.5
-    if ($11 < -1 || $12 < -1 || $15 > bar) fail[key] = 1
-    if ($13 < -1 || $14 < -1 || $15 > bar) fail_default[key] = 1
+awk -F'\t' "$settings_awk"'
+  $4 == "all" { key = setting()
+    if ($11 < -1 || $12 < -1 || $15 > bar()) fail[key] = 1
+    if ($13 < -1 || $14 < -1 || $15 > bar()) fail_default[key] = 1
     seen[key] = 1
-    if (!(key in slow) || $15 / bar > slow[key]) slow[key] = $15 / bar
+    if (!(key in slow) || $15 / bar() > slow[key]) slow[key] = $15 / bar()
   }
   END { n = 0; m = 0; for (k in seen) { if (!(k in fail)) n++; if (!(k in fail_default)) m++ }
         printf "  %d of %d settings keep within 1 point of the full search, %d within 1 point of the default alone:\n", n, length(seen), m
