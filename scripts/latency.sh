@@ -14,7 +14,9 @@
 #   [LATENCY_DATASET=rtabmap-loop] [LATENCY_SEEDS="1 2 3"] scripts/latency.sh [EVERY] [RULE-QUERY]
 #
 # LATENCY_DATASET: gardens-point (default; K = 5000 map, 960×540 queries) or
-# rtabmap-loop (K = 1000 map, 512×384 queries). EVERY: use every EVERY-th
+# rtabmap-loop (K = 1000 map, 512×384 queries), or either with its map and
+# queries swapped: gardens-point-reversed, rtabmap-loop-reversed
+# (scripts/reversed-datasets.sh, made on first use). EVERY: use every EVERY-th
 # query (default 10 for gardens-point: 20 images; 1 for rtabmap-loop: 44),
 # each sent 3 times. RULE-QUERY: extra query string, e.g. "rule=none".
 # LATENCY_SEEDS: the vocabulary seeds to build a map with and measure, one
@@ -37,15 +39,22 @@ cd "$(dirname "$0")/.."
 name=${LATENCY_DATASET:-gardens-point}
 seeds=${LATENCY_SEEDS:-1}
 case $name in
-  gardens-point) default_every=10 ;;
-  rtabmap-loop) default_every=1 ;;
-  *) echo "LATENCY_DATASET: gardens-point or rtabmap-loop, not $name" >&2; exit 2 ;;
+  gardens-point | gardens-point-reversed) default_every=10 words=5000 ;;
+  rtabmap-loop | rtabmap-loop-reversed) default_every=1 words=1000 ;;
+  *) echo "LATENCY_DATASET: gardens-point, rtabmap-loop or either with -reversed, not $name" >&2; exit 2 ;;
+esac
+case $name in
+  *-reversed)
+    src=data/datasets/$name
+    [ -f "$src/map.txt" ] || scripts/reversed-datasets.sh >&2 ;;
+  *) src=../shared/datasets/$name ;;
 esac
 # the map for vocabulary seed $1, built if missing; prints its folder
 map_for() {
   case $name in
     gardens-point) gardens_map 5000 "$1" >&2; map_dir data/gardens-5000 "$1" ;;
     rtabmap-loop) load_map "$1" >&2; map_dir data/load "$1" ;;
+    *) dataset_map "$src" "$words" "$1" "data/$name-$words" "$name" >&2; map_dir "data/$name-$words" "$1" ;;
   esac
 }
 every=${1:-$default_every}
@@ -54,7 +63,6 @@ tmp=$(mktemp -d)
 trap 'stop_server; rm -rf "$tmp"' EXIT
 plan=${LATENCY_PLAN:+[search]
 tiles = \"$LATENCY_PLAN\"}
-src=../shared/datasets/$name
 col() { cut -f"$1" "$tmp/rows" | median; }
 # "LINE PATH" of each query used
 queries() { awk -v e="$every" 'NR % e == 1 || e == 1 {print NR, $0}' $src/queries.txt; }

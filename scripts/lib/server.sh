@@ -18,6 +18,10 @@
 #   gardens_map K [SEED]     the gardens-point map (K words, vocabulary
 #                            seed SEED, default 1) in data/gardens-K/ (seed
 #                            1) or data/gardens-K-sSEED/, built on first use
+#   dataset_map SRC K SEED BASE [NAME]
+#                            the map of the dataset folder SRC (K words,
+#                            vocabulary seed SEED, named NAME) in BASE
+#                            (seed 1) or BASE-sSEED, built on first use
 #   map_dir BASE SEED        where those maps are: BASE for seed 1, else
 #                            BASE-sSEED
 #   server_config WORKERS QUEUE [DIR] [EXTRA-TOML] [IMAGES]
@@ -44,17 +48,7 @@ map_dir() {
 }
 
 load_map() {
-  [ -x "$BOWLOC_BIN" ] || cargo build --release
-  local seed=${1:-1}
-  local dir
-  dir=$(map_dir data/load "$seed")
-  mkdir -p "$dir"
-  if [ ! -f "$dir/map.bowmap" ]; then
-    "$BOWLOC_BIN" --log warn vocab build --images "$DATASET/map.txt" --words 1000 --seed "$seed" \
-      --out "$dir/vocab.bowvoc"
-    "$BOWLOC_BIN" --log warn map build --vocab "$dir/vocab.bowvoc" --images "$DATASET/map.txt" \
-      --out "$dir/map.bowmap"
-  fi
+  dataset_map "$DATASET" 1000 "${1:-1}" data/load
 }
 
 start_server() {
@@ -86,16 +80,19 @@ server_rss_kib() {
 }
 
 gardens_map() {
+  dataset_map ../shared/datasets/gardens-point "$1" "${2:-1}" "data/gardens-$1" gardens-point
+}
+
+dataset_map() {
   [ -x "$BOWLOC_BIN" ] || cargo build --release
-  local seed=${2:-1} src=../shared/datasets/gardens-point
-  local dir
-  dir=$(map_dir "data/gardens-$1" "$seed")
+  local src=$1 words=$2 seed=$3 dir
+  dir=$(map_dir "$4" "$seed")
   mkdir -p "$dir"
   if [ ! -f "$dir/map.bowmap" ]; then
-    "$BOWLOC_BIN" --log warn vocab build --images "$src/map.txt" --words "$1" --seed "$seed" \
+    "$BOWLOC_BIN" --log warn vocab build --images "$src/map.txt" --words "$words" --seed "$seed" \
       --out "$dir/vocab.bowvoc"
     "$BOWLOC_BIN" --log warn map build --vocab "$dir/vocab.bowvoc" --images "$src/map.txt" \
-      --out "$dir/map.bowmap" --name gardens-point
+      --out "$dir/map.bowmap" ${5:+--name "$5"}
   fi
 }
 
