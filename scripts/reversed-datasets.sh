@@ -8,15 +8,15 @@
 # the images are the shared ones, but the vocabulary (trained on the map
 # images only) and the map are new, and every map image was a query before.
 #
-#   scripts/reversed-datasets.sh [OUT]      (default OUT: data/datasets)
+#   scripts/reversed-datasets.sh [OUT]      (default OUT: the project's data/datasets)
 #
 # Writes OUT/<name>-reversed/{map.txt,queries.txt,ground_truth.csv} and links
 # the image folders, so `bowloc eval --dataset OUT/<name>-reversed` and
 # LATENCY_DATASET=<name>-reversed scripts/latency.sh read them.
 set -euo pipefail
-cd "$(dirname "$0")/.."
-out=${1:-data/datasets}
-shared=$(cd ../shared/datasets && pwd)
+root=$(cd "$(dirname "$0")/.." && pwd)
+out=${1:-$root/data/datasets}
+shared=$(cd "$root/../shared/datasets" && pwd)
 for name in gardens-point rtabmap-loop; do
   src=$shared/$name
   dst=$out/$name-reversed
