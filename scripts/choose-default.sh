@@ -18,10 +18,11 @@
 #
 # Environment: RULE (default place-z), WARMUP (default 20), GRID (default
 # "1 1.25 1.5 1.75 2 2.25 2.5 3"), CHOOSE and ASIDE (NAME:WORDS, NAME a
-# shared dataset or a dataset folder, e.g. data/datasets/gardens-point-reversed
-# from scripts/reversed-datasets.sh; default gardens-point:5000 and
-# rtabmap-loop:1000; ASIDE may list several, space-separated), VERIFIED (the verified stop's
-# inliers, default 12; 0: the vote rule alone, without verification) and
+# shared dataset or a dataset folder, e.g.
+# data/datasets/gardens-point-reversed from scripts/reversed-datasets.sh;
+# default gardens-point:5000 and rtabmap-loop:1000; ASIDE may list
+# several, space-separated), VERIFIED (the verified stop's inliers,
+# default 12; 0: the vote rule alone, without verification) and
 # MODEL (the verification model, default the configuration's); EVAL_ARGS,
 # more `bowloc eval` options for both datasets (e.g. "--min-inliers 6").
 set -euo pipefail
