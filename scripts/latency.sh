@@ -43,19 +43,18 @@ case $name in
   rtabmap-loop | rtabmap-loop-reversed) default_every=1 words=1000 ;;
   *) echo "LATENCY_DATASET: gardens-point, rtabmap-loop or either with -reversed, not $name" >&2; exit 2 ;;
 esac
+# the dataset's folder, and where its maps are kept (named as built)
 case $name in
-  *-reversed)
-    src=data/datasets/$name
+  gardens-point) src=../shared/datasets/$name base=data/gardens-5000 map_name=$name ;;
+  rtabmap-loop) src=$DATASET base=data/load map_name= ;;
+  *)
+    src=data/datasets/$name base=data/$name-$words map_name=$name
     [ -f "$src/map.txt" ] || scripts/reversed-datasets.sh >&2 ;;
-  *) src=../shared/datasets/$name ;;
 esac
 # the map for vocabulary seed $1, built if missing; prints its folder
 map_for() {
-  case $name in
-    gardens-point) gardens_map 5000 "$1" >&2; map_dir data/gardens-5000 "$1" ;;
-    rtabmap-loop) load_map "$1" >&2; map_dir data/load "$1" ;;
-    *) dataset_map "$src" "$words" "$1" "data/$name-$words" "$name" >&2; map_dir "data/$name-$words" "$1" ;;
-  esac
+  dataset_map "$src" "$words" "$1" "$base" "$map_name" >&2
+  map_dir "$base" "$1"
 }
 every=${1:-$default_every}
 extra=${2:-}

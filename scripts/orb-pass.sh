@@ -41,26 +41,22 @@ if [ -n "${SWEEP_FROM:-}" ]; then
   cp "$SWEEP_FROM" "$sweep"
 else
   cargo build --release --example orb_pass >&2
-  for seed in $seeds; do
-    gardens_map 5000 "$seed" >&2
-    dir=$(map_dir data/gardens-5000 "$seed")
-    run ../shared/datasets/gardens-point "$dir/vocab.bowvoc" "$dir/map.bowmap"
-  done
-  for seed in $seeds; do
-    load_map "$seed" >&2
-    dir=$(map_dir data/load "$seed")
-    run "$DATASET" "$dir/vocab.bowvoc" "$dir/map.bowmap"
-  done
+  # the example on dataset folder $1 with its maps of $2 words in $3 (seed
+  # 1) or $3-sSEED, named $4, for every seed
+  run_set() {
+    local seed dir
+    for seed in $seeds; do
+      dataset_map "$1" "$2" "$seed" "$3" "${4:-}" >&2
+      dir=$(map_dir "$3" "$seed")
+      run "$1" "$dir/vocab.bowvoc" "$dir/map.bowmap"
+    done
+  }
+  run_set ../shared/datasets/gardens-point 5000 data/gardens-5000 gardens-point
+  run_set "$DATASET" 1000 data/load
   if [ -n "${ORB_PASS_REVERSED:-}" ]; then
     scripts/reversed-datasets.sh >&2
-    for set in gardens-point-reversed:5000 rtabmap-loop-reversed:1000; do
-      name=${set%%:*} words=${set##*:}
-      for seed in $seeds; do
-        dataset_map "data/datasets/$name" "$words" "$seed" "data/$name-$words" "$name" >&2
-        dir=$(map_dir "data/$name-$words" "$seed")
-        run "data/datasets/$name" "$dir/vocab.bowvoc" "$dir/map.bowmap"
-      done
-    done
+    run_set data/datasets/gardens-point-reversed 5000 data/gardens-point-reversed-5000 gardens-point-reversed
+    run_set data/datasets/rtabmap-loop-reversed 1000 data/rtabmap-loop-reversed-1000 rtabmap-loop-reversed
   fi
   if [ -n "${SWEEP_KEEP:-}" ]; then cp "$sweep" "$SWEEP_KEEP"; fi
 fi
