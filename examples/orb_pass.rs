@@ -1,17 +1,19 @@
 //! An ORB pass before SIFT, measured against the service's answers: a
 //! prototype of a cheap first look that would answer the easy queries
-//! without SIFT. Per query, on the service's 640 px frame: ORB (1000
-//! keypoints, spread over a grid of cells, `ORB_PASS_GRID`), each
-//! descriptor's binary word (`bowloc::vocabulary::binary`, K words by
-//! k-majority over the map's ORB descriptors, drawn with the SIFT
-//! vocabulary's seed), tf-idf votes over the map images, and the top 10
-//! (`ORB_PASS_TOP`) verified by a similarity (RANSAC, 6 px, OpenCV's
-//! generator seeded per query) on word pairs (each query feature paired
-//! with the nearest map feature of its word, at most 64 bits away). A
-//! [`Setting`] says when the pass answers and with which verified
-//! candidate (its inliers, its scale against the query's, the places of
-//! the others); the answer lists that candidate, then the others in vote
-//! order.
+//! without SIFT, as the library has it (`bowloc::orb_pass`). Per query, on
+//! the service's 640 px frame: ORB (1000 keypoints, spread over a grid of
+//! cells, `ORB_PASS_GRID`; `bowloc::features::orb`), each descriptor's
+//! binary word (`bowloc::vocabulary::binary`, K words by k-majority over
+//! the map's ORB descriptors, drawn with the SIFT vocabulary's seed),
+//! tf-idf votes over the map images, and the top 10 (`ORB_PASS_TOP`)
+//! verified by a similarity (RANSAC, 6 px, OpenCV's fixed seed) on word
+//! pairs (each query feature paired with the nearest map feature of its
+//! word, at most 64 bits away), the inliers counted as the service's
+//! verification counts them and their scale the spread of the map's
+//! inliers over the query's. A [`Setting`] says when the pass answers and
+//! with which verified candidate (its inliers, its scale against the
+//! query's, the places of the others); the answer lists that candidate,
+//! then the others in vote order.
 //!
 //! The SIFT map and vocabulary are given; they are loaded and searched as
 //! `bowloc serve` loads and searches them with its default configuration
@@ -43,19 +45,17 @@
 
 use bowloc::dataset::Dataset;
 use bowloc::eval::machine::Cpu;
-use bowloc::features::{DecodeLimits, ExtractConfig, TileGrid, decode};
-use bowloc::index::build::{ImageWords, MapBuilder, weigh};
+use bowloc::features::fit::OpenCvFit;
+use bowloc::features::orb::{ORB_FEATURES, OrbDetector};
+use bowloc::features::{DecodeLimits, ExtractConfig, Frame, TileGrid, decode};
+use bowloc::geometry::verify::{Estimator, FitParams, Model};
+use bowloc::orb_pass::{Checked, OrbImage, OrbIndex, Pick, Setting, answer};
 use bowloc::search::SearchOptions;
 use bowloc::server::config::Config;
-use bowloc::vocabulary::binary::{BinaryDescriptor, BinaryVocabulary, from_rows, hamming};
-use opencv::core::{KeyPoint, Mat, Point2f, Vector, no_array};
-use opencv::features2d::{ORB, ORB_ScoreType};
-use opencv::prelude::*;
+use bowloc::vocabulary::binary::{BinaryDescriptor, BinaryVocabulary};
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::time::Instant;
 
-const ORB_FEATURES: i32 = 1000;
 const WORDS: usize = 1000;
 const ITERATIONS: usize = 8;
 /// Candidates verified, in vote order (`ORB_PASS_TOP`, default 10).
@@ -98,84 +98,15 @@ const SWEEP_PICKS: [Pick; 9] = [
 const SWEEP_FLOORS: [usize; 7] = [10, 12, 15, 20, 25, 30, 40];
 const SWEEP_WINDOWS: [f64; 5] = [0.05, 0.1, 0.15, 0.2, 0.3];
 const SWEEP_MARGINS: [f64; 3] = [0.0, 1.0, 1.25];
-/// Map images more than this many apart are other places (the sequence
-/// the map was taken in; gardens-point's ground truth tolerance).
-const PLACE_APART: usize = 2;
-
-/// One setting of the pass: which verified candidate it answers with, the
-/// inliers it needs, how far from the query's its scale may be
-/// (|ln s| ≤ `window`), and the margin over other places: the pick must
-/// have at least `margin` times the inliers of every verified candidate
-/// more than `PLACE_APART` map images away (0: no such check); with
-/// `agree`, the pick must also lie within `PLACE_APART` map images of the
-/// votes' first candidate.
-#[derive(Debug, Clone, Copy)]
-struct Setting {
-    pick: Pick,
-    floor: usize,
-    window: f64,
-    margin: f64,
-    agree: bool,
-}
-
-impl Setting {
-    /// How the output names it: `nearest-0.7 15, |ln s| <= 0.2, margin 0`
-    /// (and `, agree`).
-    fn label(self) -> String {
-        format!(
-            "{} {}, |ln s| <= {}, margin {}{}",
-            self.pick.name(),
-            self.floor,
-            self.window,
-            self.margin,
-            if self.agree { ", agree" } else { "" }
-        )
-    }
-
-    const fn new(pick: Pick, floor: usize, window: f64, margin: f64) -> Self {
-        Self {
-            pick,
-            floor,
-            window,
-            margin,
-            agree: false,
-        }
-    }
-}
-
-/// Which verified candidate the pass answers with.
-#[derive(Debug, Clone, Copy)]
-enum Pick {
-    /// Of those with `floor` inliers within the window and at least
-    /// `share` of the most inliers among them, the one whose scale is
-    /// nearest the query's.
-    NearestScale { share: f64 },
-    /// The one with the most inliers, if it has `floor` and its scale is
-    /// within the window.
-    MostInliers,
-    /// The place of the one with the most inliers, refined by scale: of it
-    /// and the verified candidates within `PLACE_APART` map images of it
-    /// with at least `share` of its inliers, the one whose scale is nearest
-    /// the query's, if it has `floor` and its scale is within the window.
-    Refined { share: f64 },
-}
-
-impl Pick {
-    /// A short name for tables: `nearest-0.7`, `most`.
-    fn name(self) -> String {
-        match self {
-            Pick::NearestScale { share } => format!("nearest-{share}"),
-            Pick::MostInliers => "most".into(),
-            Pick::Refined { share } => format!("refined-{share}"),
-        }
-    }
-}
-
-/// One image's ORB keypoint centres and descriptors.
-struct Orb {
-    centres: Vec<(f32, f32)>,
-    descriptors: Vec<BinaryDescriptor>,
-}
+/// The similarity the candidates are verified with: RANSAC, 6 px, up to
+/// 2000 iterations.
+const FIT: FitParams = FitParams {
+    model: Model::Similarity,
+    estimator: Estimator::Ransac,
+    threshold_px: 6.0,
+    confidence: 0.99,
+    max_iters: 2000,
+};
 
 /// ORB of an image decoded to the frame of `config` (the vocabulary's
 /// extraction settings, as the service's); with the time the decode and ORB
@@ -183,34 +114,14 @@ struct Orb {
 fn orb_of(
     bytes: &[u8],
     config: &ExtractConfig,
-    detector: &mut Detector,
-) -> anyhow::Result<(Orb, f64, f64)> {
+    detector: &mut OrbDetector,
+) -> anyhow::Result<(OrbImage, f64, f64)> {
     let t = Instant::now();
     let image = decode(bytes, DecodeLimits::default(), config.max_side)?;
-    let mut frame = bowloc::features::Frame::new(&image, config)?;
+    let mut frame = Frame::new(&image, config)?;
     let decode_ms = t.elapsed().as_secs_f64() * 1e3;
-    let (mat, _) = frame.parts();
     let t = Instant::now();
-    let (mut keys, mut raw) = (Vector::<KeyPoint>::new(), Mat::default());
-    let orb = &mut detector.orb;
-    match detector.grid {
-        None => orb.detect_and_compute(mat, &no_array(), &mut keys, &mut raw, false)?,
-        Some((cols, rows)) => {
-            let mut all = Vector::<KeyPoint>::new();
-            orb.detect(mat, &mut all, &no_array())?;
-            keys = spread(&all, cols, rows, mat.cols() as f32, mat.rows() as f32);
-            orb.compute(mat, &mut keys, &mut raw)?;
-        }
-    }
-    let descriptors = if raw.empty() {
-        Vec::new()
-    } else {
-        from_rows(raw.data_bytes()?)
-    };
-    let orb = Orb {
-        centres: keys.iter().map(|k| (k.pt().x, k.pt().y)).collect(),
-        descriptors,
-    };
+    let orb = detector.detect(&mut frame)?;
     Ok((orb, decode_ms, t.elapsed().as_secs_f64() * 1e3))
 }
 
@@ -225,218 +136,22 @@ fn grid_from_env() -> anyhow::Result<Option<(usize, usize)>> {
     }
     v.split_once('x')
         .and_then(|(c, r)| Some((c.parse().ok()?, r.parse().ok()?)))
-        .filter(|&(c, r): &(usize, usize)| c * r > 0 && c * r <= ORB_FEATURES as usize)
+        .filter(|&(c, r): &(usize, usize)| c * r > 0 && c * r <= ORB_FEATURES)
         .map(Some)
         .ok_or_else(|| anyhow::anyhow!("ORB_PASS_GRID={v}: want COLSxROWS or none"))
 }
 
-/// The strongest keypoints of each of `cols`×`rows` cells, an equal share
-/// of `ORB_FEATURES` each.
-fn spread(all: &Vector<KeyPoint>, cols: usize, rows: usize, w: f32, h: f32) -> Vector<KeyPoint> {
-    let mut cells: Vec<Vec<KeyPoint>> = vec![Vec::new(); cols * rows];
-    for k in all.iter() {
-        let c = ((k.pt().x / w * cols as f32) as usize).min(cols - 1);
-        let r = ((k.pt().y / h * rows as f32) as usize).min(rows - 1);
-        cells[r * cols + c].push(k);
-    }
-    let share = ORB_FEATURES as usize / (cols * rows);
-    let mut kept = Vector::<KeyPoint>::new();
-    for mut cell in cells {
-        cell.sort_by(|a, b| b.response().total_cmp(&a.response()));
-        cell.into_iter().take(share).for_each(|k| kept.push(k));
-    }
-    kept
-}
-
-/// An ORB detector and the grid its keypoints are spread over.
-struct Detector {
-    orb: opencv::core::Ptr<ORB>,
-    grid: Option<(usize, usize)>,
-}
-
-impl Detector {
-    fn new(grid: Option<(usize, usize)>) -> anyhow::Result<Self> {
-        // four times the corners when the grid picks among them
-        let features = if grid.is_some() {
-            4 * ORB_FEATURES
-        } else {
-            ORB_FEATURES
-        };
-        let orb = ORB::create(
-            features,
-            1.2,
-            8,
-            31,
-            0,
-            2,
-            ORB_ScoreType::HARRIS_SCORE,
-            31,
-            20,
-        )?;
-        Ok(Self { orb, grid })
-    }
-}
-
-/// tf-idf of a word list, L2-normalised, as the SIFT map weighs an image:
-/// (word, weight) sorted by word.
-fn tf_idf(words: &[u32], idf: &[f32]) -> Vec<(u32, f32)> {
-    weigh(&ImageWords::from_words("", words), idf).0
-}
-
-/// The map's ORB images as an inverted tf-idf index.
-struct OrbMap {
-    images: Vec<Orb>,
-    words_of: Vec<Vec<u32>>,
-    postings: Vec<Vec<(u32, f32)>>,
-    idf: Vec<f32>,
-}
-
-impl OrbMap {
-    fn build(images: Vec<Orb>, vocabulary: &BinaryVocabulary) -> Self {
-        let words_of: Vec<Vec<u32>> = images
-            .par_iter()
-            .map(|m| m.descriptors.iter().map(|d| vocabulary.word(d)).collect())
-            .collect();
-        // the SIFT map's idf, over the ORB words
-        let mut builder = MapBuilder::new(vocabulary.len());
-        for ws in &words_of {
-            builder.add(ImageWords::from_words("", ws));
-        }
-        let idf = builder.idf();
-        let mut postings = vec![Vec::new(); vocabulary.len()];
-        for (image, ws) in words_of.iter().enumerate() {
-            for (w, x) in tf_idf(ws, &idf) {
-                postings[w as usize].push((image as u32, x));
-            }
-        }
-        Self {
-            images,
-            words_of,
-            postings,
-            idf,
-        }
-    }
-
-    /// The `n` map images of the highest cosine score, best first.
-    fn top(&self, words: &[u32], n: usize) -> Vec<usize> {
-        let mut score = vec![0f32; self.images.len()];
-        for (w, x) in tf_idf(words, &self.idf) {
-            for &(image, y) in &self.postings[w as usize] {
-                score[image as usize] += x * y;
-            }
-        }
-        let mut order: Vec<usize> = (0..score.len()).collect();
-        order.sort_by(|&a, &b| score[b].total_cmp(&score[a]));
-        order.truncate(n);
-        order
-    }
-
-    /// Inliers of a similarity fitted to word pairs from the query to map
-    /// image `m`, and its scale.
-    fn verify(&self, query: &Orb, words: &[u32], m: usize) -> anyhow::Result<(usize, f64)> {
-        let map = &self.images[m];
-        let mut by_word: HashMap<u32, Vec<usize>> = HashMap::new();
-        for (j, &w) in self.words_of[m].iter().enumerate() {
-            by_word.entry(w).or_default().push(j);
-        }
-        let (mut from, mut to) = (Vector::<Point2f>::new(), Vector::<Point2f>::new());
-        for (i, w) in words.iter().enumerate() {
-            let nearest = by_word.get(w).and_then(|js| {
-                js.iter()
-                    .map(|&j| (hamming(&query.descriptors[i], &map.descriptors[j]), j))
-                    .min()
-            });
-            if let Some((h, j)) = nearest
-                && h <= 64
-            {
-                from.push(Point2f::new(query.centres[i].0, query.centres[i].1));
-                to.push(Point2f::new(map.centres[j].0, map.centres[j].1));
-            }
-        }
-        if from.len() < 4 {
-            return Ok((0, 0.0));
-        }
-        let mut mask = Mat::default();
-        let model = opencv::calib3d::estimate_affine_partial_2d(
-            &from,
-            &to,
-            &mut mask,
-            opencv::calib3d::RANSAC,
-            6.0,
-            2000,
-            0.99,
-            10,
-        )?;
-        if model.empty() {
-            return Ok((0, 0.0));
-        }
-        let (a, b) = (*model.at_2d::<f64>(0, 0)?, *model.at_2d::<f64>(1, 0)?);
-        Ok((opencv::core::count_non_zero(&mask)? as usize, a.hypot(b)))
-    }
-}
-
-/// What the pass found for one query: each verified candidate's (inliers,
-/// scale, map image) in vote order, and the pass's time after the decode.
+/// What the pass found for one query: each checked candidate in vote
+/// order, and the pass's time after the decode.
 struct Pass {
-    verified: Vec<(usize, f64, usize)>,
+    checked: Vec<Checked>,
     ms: f64,
 }
 
 impl Pass {
-    /// The pass's answer under a setting, if it answers: that candidate,
-    /// then the others in vote order.
+    /// The pass's answer under a setting, if it answers (map image ids).
     fn answer(&self, setting: Setting) -> Option<Vec<usize>> {
-        let Setting {
-            pick,
-            floor,
-            window,
-            margin,
-            agree,
-        } = setting;
-        let scale_gap = |s: f64| if s > 0.0 { s.ln().abs() } else { f64::INFINITY };
-        let fits = |v: &&(usize, f64, usize)| v.0 >= floor && scale_gap(v.1) <= window;
-        // the most inliers, the nearer scale on ties
-        let strongest = || {
-            self.verified.iter().max_by(|a, b| {
-                a.0.cmp(&b.0)
-                    .then(scale_gap(b.1).total_cmp(&scale_gap(a.1)))
-            })
-        };
-        let best = match pick {
-            Pick::NearestScale { share } => {
-                let strongest = self.verified.iter().filter(fits).map(|v| v.0).max()?;
-                self.verified
-                    .iter()
-                    .filter(fits)
-                    .filter(|v| v.0 as f64 >= share * strongest as f64)
-                    .min_by(|a, b| scale_gap(a.1).total_cmp(&scale_gap(b.1)))?
-            }
-            Pick::MostInliers => strongest().filter(fits)?,
-            Pick::Refined { share } => {
-                let strongest = strongest()?;
-                self.verified
-                    .iter()
-                    .filter(|v| v.2.abs_diff(strongest.2) <= PLACE_APART)
-                    .filter(|v| v.0 as f64 >= share * strongest.0 as f64)
-                    .min_by(|a, b| scale_gap(a.1).total_cmp(&scale_gap(b.1)))
-                    .filter(fits)?
-            }
-        };
-        let other_place = self
-            .verified
-            .iter()
-            .filter(|v| v.2.abs_diff(best.2) > PLACE_APART)
-            .map(|v| v.0)
-            .max()
-            .unwrap_or(0);
-        if (best.0 as f64) < margin * other_place as f64 {
-            return None;
-        }
-        if agree && best.2.abs_diff(self.verified.first()?.2) > PLACE_APART {
-            return None;
-        }
-        let rest = self.verified.iter().filter(|v| v.2 != best.2);
-        Some(std::iter::once(best.2).chain(rest.map(|v| v.2)).collect())
+        answer(&self.checked, setting).map(|ids| ids.into_iter().map(|m| m as usize).collect())
     }
 }
 
@@ -480,21 +195,22 @@ fn main() -> anyhow::Result<()> {
     let verify = config.verify.enabled;
     let seed = localizer.vocab.meta().seed;
     let read = |r: &bowloc::dataset::ImageRef| std::fs::read(&r.path);
-    let map_orb: Vec<Orb> = dataset
+    let map_orb: Vec<OrbImage> = dataset
         .map
         .par_iter()
-        .map(|r| Ok(orb_of(&read(r)?, &localizer.extract, &mut Detector::new(grid)?)?.0))
+        .map(|r| Ok(orb_of(&read(r)?, &localizer.extract, &mut OrbDetector::new(grid)?)?.0))
         .collect::<anyhow::Result<_>>()?;
     let all: Vec<BinaryDescriptor> = map_orb.iter().flat_map(|m| m.descriptors.clone()).collect();
     let vocabulary = BinaryVocabulary::train(&all, WORDS, ITERATIONS, seed);
-    let orb_map = OrbMap::build(map_orb, &vocabulary);
+    let orb_map = OrbIndex::build(map_orb, &vocabulary);
+    let fit = OpenCvFit::new(FIT);
 
     let full = SearchOptions {
         rule: bowloc::search::RuleSpec::new("none", None).map_err(anyhow::Error::msg)?,
         min_features: 0,
         ..default.clone()
     };
-    let mut orb = Detector::new(grid)?;
+    let mut orb = OrbDetector::new(grid)?;
     // the service learns its plan from the requests it answers: one round
     // of every query first, as a server that has been answering a while
     for (q, r) in dataset.queries.iter().enumerate() {
@@ -539,21 +255,9 @@ fn main() -> anyhow::Result<()> {
         })?;
         let (query, decode_ms, orb_ms) = orb_of(&bytes, &localizer.extract, &mut orb)?;
         let t = Instant::now();
-        let words: Vec<u32> = query
-            .descriptors
-            .iter()
-            .map(|d| vocabulary.word(d))
-            .collect();
-        // RANSAC draws from OpenCV's generator: seeded per query, so the
-        // pass's answer does not depend on what ran before it
-        opencv::core::set_rng_seed(q as i32 + 1)?;
-        let verified = orb_map
-            .top(&words, top)
-            .into_iter()
-            .map(|m| orb_map.verify(&query, &words, m).map(|(n, s)| (n, s, m)))
-            .collect::<anyhow::Result<Vec<_>>>()?;
+        let words = vocabulary.words_of(&query.descriptors);
         let pass = Pass {
-            verified,
+            checked: orb_map.check(&query, &words, top, &fit),
             ms: orb_ms + t.elapsed().as_secs_f64() * 1e3,
         };
         rows.push((pass, decode_ms, whole, service));

@@ -20,6 +20,10 @@
 //!   trait implemented in [`features`]).
 //! - [`index`] — the map: a tf-idf inverted index over the map's images, and
 //!   each map feature's word, keypoint and signature.
+//! - [`orb_pass`] — a cheap first look before SIFT: ORB's binary words voted
+//!   over the map's ORB side, the best candidates verified by a similarity,
+//!   and the setting that says whether that answers the query (measured in
+//!   `examples/orb_pass.rs`; not yet in the service).
 //! - [`live`] — live maps: images added and removed while serving, a
 //!   durable change log beside the map file, compaction into a new file.
 //! - [`store`] — the memory-mapped, checksummed file format both are kept in.
@@ -40,7 +44,7 @@
 //!   bounded worker pool, metrics, OpenAPI document, protobuf answers.
 //!
 //! The algorithmic core (`quantize`, `vocabulary`, `index`, `search`,
-//! `geometry`, `sequence`) has no OpenCV or HTTP types; front ends (`cli`,
+//! `geometry`, `orb_pass`, `sequence`) has no OpenCV or HTTP types; front ends (`cli`,
 //! `server`) live at the edges.
 
 /// A setting chosen by name from a fixed list (a tile order, a
@@ -100,6 +104,7 @@ pub mod features;
 pub mod geometry;
 pub mod index;
 pub mod live;
+pub mod orb_pass;
 pub mod pipeline;
 pub mod quantize;
 pub mod report;

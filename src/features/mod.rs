@@ -1,6 +1,6 @@
 //! The image edge of the pipeline (decode → extract): bytes in, SIFT
-//! keypoints and descriptors out (an `ndarray` matrix). This is the only module that touches
-//! OpenCV; everything downstream works on plain arrays.
+//! keypoints and descriptors out (an `ndarray` matrix), and ORB's for the
+//! ORB pass ([`orb`]). This is the only module that touches OpenCV; everything downstream works on plain arrays.
 
 mod buffers;
 mod coarse_choice;
@@ -9,6 +9,7 @@ mod corners;
 mod decode;
 mod extract;
 pub mod fit;
+pub mod orb;
 mod thumbnail;
 mod tiles;
 mod warm;

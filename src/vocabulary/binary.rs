@@ -2,7 +2,8 @@
 //! trained by k-majority (k-means under the Hamming distance, each centroid
 //! the bitwise majority of the descriptors nearest it) and searched
 //! exhaustively with popcounts. Plain arrays only: OpenCV, which makes the
-//! descriptors, stays with the caller (today `examples/orb_pass.rs`).
+//! descriptors, stays at the extraction edge (`features::orb`); the ORB pass
+//! ([`crate::orb_pass`]) votes with these words.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -92,6 +93,11 @@ impl BinaryVocabulary {
     /// vocabulary.
     pub fn word(&self, d: &BinaryDescriptor) -> u32 {
         nearest(&self.words, d)
+    }
+
+    /// The word of each descriptor, in order.
+    pub fn words_of(&self, ds: &[BinaryDescriptor]) -> Vec<u32> {
+        ds.iter().map(|d| self.word(d)).collect()
     }
 }
 

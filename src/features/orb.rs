@@ -1,0 +1,137 @@
+//! ORB at the extraction edge, for the ORB pass ([`crate::orb_pass`]):
+//! keypoint centres and 256-bit descriptors of the extraction frame, either
+//! ORB's own strongest corners or corners spread over a grid of cells.
+
+use super::{FeatureError, Frame};
+use crate::orb_pass::OrbImage;
+use crate::vocabulary::binary::from_rows;
+use opencv::core::{KeyPoint, Mat, Ptr, Vector, no_array};
+use opencv::features2d::{ORB, ORB_ScoreType};
+use opencv::prelude::*;
+
+/// Keypoints an image keeps.
+pub const ORB_FEATURES: usize = 1000;
+
+/// An ORB detector, and the cells its keypoints are spread over (`None`:
+/// ORB's own strongest corners, wherever they are).
+pub struct OrbDetector {
+    orb: Ptr<ORB>,
+    grid: Option<(usize, usize)>,
+}
+
+impl OrbDetector {
+    /// With a grid of `cols`×`rows` cells, ORB detects four times
+    /// [`ORB_FEATURES`] corners and the strongest of each cell are kept, an
+    /// equal share each, so the keypoints cover the frame.
+    pub fn new(grid: Option<(usize, usize)>) -> Result<Self, FeatureError> {
+        if let Some((cols, rows)) = grid
+            && !(1..=ORB_FEATURES).contains(&(cols * rows))
+        {
+            return Err(FeatureError::OpenCv(format!(
+                "an ORB grid of {cols}x{rows} cells: want 1 to {ORB_FEATURES} cells"
+            )));
+        }
+        let features = ORB_FEATURES * if grid.is_some() { 4 } else { 1 };
+        let orb = ORB::create(
+            features as i32,
+            1.2,
+            8,
+            31,
+            0,
+            2,
+            ORB_ScoreType::HARRIS_SCORE,
+            31,
+            20,
+        )?;
+        Ok(Self { orb, grid })
+    }
+
+    /// ORB of the extraction frame.
+    pub fn detect(&mut self, frame: &mut Frame) -> Result<OrbImage, FeatureError> {
+        let (mat, _) = frame.parts();
+        let (mut keys, mut raw) = (Vector::<KeyPoint>::new(), Mat::default());
+        match self.grid {
+            None => self
+                .orb
+                .detect_and_compute(mat, &no_array(), &mut keys, &mut raw, false)?,
+            Some((cols, rows)) => {
+                let mut all = Vector::<KeyPoint>::new();
+                self.orb.detect(mat, &mut all, &no_array())?;
+                keys = spread(&all, cols, rows, mat.cols() as f32, mat.rows() as f32);
+                self.orb.compute(mat, &mut keys, &mut raw)?;
+            }
+        }
+        let descriptors = if raw.empty() {
+            Vec::new()
+        } else {
+            from_rows(raw.data_bytes()?)
+        };
+        Ok(OrbImage {
+            centres: keys.iter().map(|k| [k.pt().x, k.pt().y]).collect(),
+            descriptors,
+        })
+    }
+}
+
+/// The strongest keypoints of each of `cols`×`rows` cells of a `w`×`h`
+/// frame, an equal share of [`ORB_FEATURES`] each.
+fn spread(all: &Vector<KeyPoint>, cols: usize, rows: usize, w: f32, h: f32) -> Vector<KeyPoint> {
+    let mut cells: Vec<Vec<KeyPoint>> = vec![Vec::new(); cols * rows];
+    for k in all.iter() {
+        let c = ((k.pt().x / w * cols as f32) as usize).min(cols - 1);
+        let r = ((k.pt().y / h * rows as f32) as usize).min(rows - 1);
+        cells[r * cols + c].push(k);
+    }
+    let share = ORB_FEATURES / (cols * rows);
+    let mut kept = Vector::<KeyPoint>::new();
+    for mut cell in cells {
+        cell.sort_by(|a, b| b.response().total_cmp(&a.response()));
+        cell.into_iter().take(share).for_each(|k| kept.push(k));
+    }
+    kept
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::features::{DecodeLimits, ExtractConfig, decode, warm_up_image};
+
+    #[test]
+    fn keypoints_and_descriptors_come_in_pairs_inside_the_frame() {
+        let config = ExtractConfig::default();
+        let bytes = warm_up_image(&config, DecodeLimits::default().max_pixels).unwrap();
+        let image = decode(&bytes, DecodeLimits::default(), config.max_side).unwrap();
+        for grid in [None, Some((4, 3))] {
+            let mut frame = Frame::new(&image, &config).unwrap();
+            let (w, h) = frame.size();
+            let orb = OrbDetector::new(grid).unwrap().detect(&mut frame).unwrap();
+            assert!(!orb.centres.is_empty(), "{grid:?}: no ORB keypoints");
+            assert!(orb.centres.len() <= ORB_FEATURES);
+            assert_eq!(orb.centres.len(), orb.descriptors.len());
+            assert!(
+                orb.centres
+                    .iter()
+                    .all(|&[x, y]| (0.0..w as f32).contains(&x) && (0.0..h as f32).contains(&y))
+            );
+        }
+        assert!(OrbDetector::new(Some((0, 3))).is_err());
+    }
+
+    #[test]
+    fn a_blank_frame_has_no_keypoints() {
+        let config = ExtractConfig::default();
+        let flat = Mat::new_rows_cols_with_default(
+            48,
+            64,
+            opencv::core::CV_8UC1,
+            opencv::core::Scalar::all(128.0),
+        )
+        .unwrap();
+        let mut png = Vector::<u8>::new();
+        opencv::imgcodecs::imencode(".png", &flat, &mut png, &Vector::new()).unwrap();
+        let image = decode(png.as_slice(), DecodeLimits::default(), config.max_side).unwrap();
+        let mut frame = Frame::new(&image, &config).unwrap();
+        let orb = OrbDetector::new(None).unwrap().detect(&mut frame).unwrap();
+        assert_eq!(orb, OrbImage::default());
+    }
+}

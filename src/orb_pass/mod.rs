@@ -1,0 +1,18 @@
+//! The ORB pass: a cheap first look at a query before SIFT. ORB's binary
+//! descriptors (made at the extraction edge, `features::orb`) are turned
+//! into binary words ([`crate::vocabulary::binary`]) and voted over the map
+//! images by tf-idf ([`index`]); the best-voted candidates are verified by a
+//! similarity on word pairs ([`index::OrbIndex::check`]); and a [`Setting`]
+//! says from what that check found whether the pass answers, and with which
+//! candidate ([`pick`]). A query the pass does not answer goes on to the
+//! SIFT search. Plain arrays only: the model fit is the trait
+//! [`crate::geometry::verify::ModelFit`].
+//!
+//! Measured in `examples/orb_pass.rs` (docs/performance.md, "An ORB pass
+//! before SIFT").
+
+pub mod index;
+pub mod pick;
+
+pub use index::{Checked, OrbImage, OrbIndex};
+pub use pick::{PLACE_APART, Pick, Setting, answer};
