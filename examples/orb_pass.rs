@@ -45,19 +45,15 @@
 
 use bowloc::dataset::Dataset;
 use bowloc::eval::machine::Cpu;
-use bowloc::features::fit::OpenCvFit;
-use bowloc::features::orb::{ORB_FEATURES, OrbDetector};
-use bowloc::features::{DecodeLimits, ExtractConfig, Frame, TileGrid, decode};
-use bowloc::geometry::verify::{Estimator, FitParams, Model};
-use bowloc::orb_pass::{Checked, OrbImage, OrbIndex, Pick, Setting, answer};
+use bowloc::features::orb::ORB_FEATURES;
+use bowloc::features::{DecodeLimits, TileGrid, decode};
+use bowloc::orb_pass::params::parse_grid;
+use bowloc::orb_pass::{Checked, OrbPassParams, Pick, Setting, answer};
+use bowloc::pipeline::{OrbPass, build_orb_side};
 use bowloc::search::SearchOptions;
 use bowloc::server::config::Config;
-use bowloc::vocabulary::binary::{BinaryDescriptor, BinaryVocabulary};
-use rayon::prelude::*;
 use std::time::Instant;
 
-const WORDS: usize = 1000;
-const ITERATIONS: usize = 8;
 /// Candidates verified, in vote order (`ORB_PASS_TOP`, default 10).
 fn top_from_env() -> anyhow::Result<usize> {
     match std::env::var("ORB_PASS_TOP") {
@@ -98,47 +94,13 @@ const SWEEP_PICKS: [Pick; 9] = [
 const SWEEP_FLOORS: [usize; 7] = [10, 12, 15, 20, 25, 30, 40];
 const SWEEP_WINDOWS: [f64; 5] = [0.05, 0.1, 0.15, 0.2, 0.3];
 const SWEEP_MARGINS: [f64; 3] = [0.0, 1.0, 1.25];
-/// The similarity the candidates are verified with: RANSAC, 6 px, up to
-/// 2000 iterations.
-const FIT: FitParams = FitParams {
-    model: Model::Similarity,
-    estimator: Estimator::Ransac,
-    threshold_px: 6.0,
-    confidence: 0.99,
-    max_iters: 2000,
-};
-
-/// ORB of an image decoded to the frame of `config` (the vocabulary's
-/// extraction settings, as the service's); with the time the decode and ORB
-/// took (ms).
-fn orb_of(
-    bytes: &[u8],
-    config: &ExtractConfig,
-    detector: &mut OrbDetector,
-) -> anyhow::Result<(OrbImage, f64, f64)> {
-    let t = Instant::now();
-    let image = decode(bytes, DecodeLimits::default(), config.max_side)?;
-    let mut frame = Frame::new(&image, config)?;
-    let decode_ms = t.elapsed().as_secs_f64() * 1e3;
-    let t = Instant::now();
-    let orb = detector.detect(&mut frame)?;
-    Ok((orb, decode_ms, t.elapsed().as_secs_f64() * 1e3))
-}
-
 /// The cells keypoints are spread over (`ORB_PASS_GRID=COLSxROWS`, default
 /// 4x3): ORB detects four times as many corners and the strongest of each
 /// cell are kept, so the keypoints cover the frame. `ORB_PASS_GRID=none`:
 /// ORB's own strongest corners, wherever they are.
 fn grid_from_env() -> anyhow::Result<Option<(usize, usize)>> {
     let v = std::env::var("ORB_PASS_GRID").unwrap_or_else(|_| "4x3".into());
-    if v == "none" {
-        return Ok(None);
-    }
-    v.split_once('x')
-        .and_then(|(c, r)| Some((c.parse().ok()?, r.parse().ok()?)))
-        .filter(|&(c, r): &(usize, usize)| c * r > 0 && c * r <= ORB_FEATURES)
-        .map(Some)
-        .ok_or_else(|| anyhow::anyhow!("ORB_PASS_GRID={v}: want COLSxROWS or none"))
+    parse_grid(&v).map_err(|e| anyhow::anyhow!("ORB_PASS_GRID={e}"))
 }
 
 /// What the pass found for one query: each checked candidate in vote
@@ -195,22 +157,19 @@ fn main() -> anyhow::Result<()> {
     let verify = config.verify.enabled;
     let seed = localizer.vocab.meta().seed;
     let read = |r: &bowloc::dataset::ImageRef| std::fs::read(&r.path);
-    let map_orb: Vec<OrbImage> = dataset
-        .map
-        .par_iter()
-        .map(|r| Ok(orb_of(&read(r)?, &localizer.extract, &mut OrbDetector::new(grid)?)?.0))
-        .collect::<anyhow::Result<_>>()?;
-    let all: Vec<BinaryDescriptor> = map_orb.iter().flat_map(|m| m.descriptors.clone()).collect();
-    let vocabulary = BinaryVocabulary::train(&all, WORDS, ITERATIONS, seed);
-    let orb_map = OrbIndex::build(map_orb, &vocabulary);
-    let fit = OpenCvFit::new(FIT);
+    let params = OrbPassParams {
+        top,
+        ..OrbPassParams::default()
+    };
+    let side = build_orb_side(&localizer, &dataset.map, params.words, grid)?;
+    let words = side.vocabulary.len();
+    let orb_pass = OrbPass::new(side, &params);
 
     let full = SearchOptions {
         rule: bowloc::search::RuleSpec::new("none", None).map_err(anyhow::Error::msg)?,
         min_features: 0,
         ..default.clone()
     };
-    let mut orb = OrbDetector::new(grid)?;
     // the service learns its plan from the requests it answers: one round
     // of every query first, as a server that has been answering a while
     for (q, r) in dataset.queries.iter().enumerate() {
@@ -253,19 +212,20 @@ fn main() -> anyhow::Result<()> {
             localizer.learn(plan, &answer);
             Ok(ids(answer))
         })?;
-        let (query, decode_ms, orb_ms) = orb_of(&bytes, &localizer.extract, &mut orb)?;
         let t = Instant::now();
-        let words = vocabulary.words_of(&query.descriptors);
+        let image = decode(&bytes, DecodeLimits::default(), localizer.extract.max_side)?;
+        let decode_ms = t.elapsed().as_secs_f64() * 1e3;
+        let look = orb_pass.look(&image, &localizer.extract)?;
         let pass = Pass {
-            checked: orb_map.check(&query, &words, top, &fit),
-            ms: orb_ms + t.elapsed().as_secs_f64() * 1e3,
+            checked: look.checked,
+            ms: look.took.as_secs_f64() * 1e3,
         };
         rows.push((pass, decode_ms, whole, service));
     }
 
     let cpu = Cpu::here();
     println!(
-        "{}: {} queries, {} map images; SIFT K = {}, vocabulary seed {seed}; ORB {ORB_FEATURES} features, K = {WORDS}, top {} verified; {} ({}, {} CPUs), one thread",
+        "{}: {} queries, {} map images; SIFT K = {}, vocabulary seed {seed}; ORB {ORB_FEATURES} features, K = {words}, top {} verified; {} ({}, {} CPUs), one thread",
         dataset.name,
         dataset.queries.len(),
         dataset.map.len(),

@@ -29,6 +29,11 @@
 # (`sequence=…&frame=N`, N the query's line; one sequence per pass), so the
 # sequence filter's stop (`sequence.rule`) decides where they stop; the full
 # search is sent alone, as before.
+# LATENCY_ORB_PASS=1: the ORB pass looks at each of the default's requests
+# first ([orb_pass] enabled; each map's ORB side built beside it on first
+# use with `bowloc map orb-pass`); the comparison says how many it answered.
+# The comparison also prints recall@1 and recall@5 of the full search's and
+# the default's answers against the dataset's ground truth.
 # The server learns the coarse pass (`tiles = "…,auto"`) from the requests
 # it answers, as it does in service; each server answers the breakdown's
 # requests before the comparison (the first 32 are the learned plan's
@@ -54,7 +59,13 @@ esac
 # the map for vocabulary seed $1, built if missing; prints its folder
 map_for() {
   dataset_map "$src" "$words" "$1" "$base" "$map_name" >&2
-  map_dir "$base" "$1"
+  local dir
+  dir=$(map_dir "$base" "$1")
+  if [ -n "${LATENCY_ORB_PASS:-}" ] && [ ! -f "$dir/map.orbpass" ]; then
+    "$BOWLOC_BIN" map orb-pass --vocab "$dir/vocab.bowvoc" --map "$dir/map.bowmap" \
+      --images "$src/map.txt" >&2
+  fi
+  echo "$dir"
 }
 every=${1:-$default_every}
 extra=${2:-}
@@ -62,6 +73,8 @@ tmp=$(mktemp -d)
 trap 'stop_server; rm -rf "$tmp"' EXIT
 plan=${LATENCY_PLAN:+[search]
 tiles = \"$LATENCY_PLAN\"}
+orb=${LATENCY_ORB_PASS:+[orb_pass]
+enabled = true}
 col() { cut -f"$1" "$tmp/rows" | median; }
 # "LINE PATH" of each query used
 queries() { awk -v e="$every" 'NR % e == 1 || e == 1 {print NR, $0}' $src/queries.txt; }
@@ -102,12 +115,14 @@ compare() {
   : >"$tmp/pairs"
   for pass in 1 2 3; do
     queries | while read -r n q; do
-      full=$(curl -s -o /dev/null -w '%{time_total}' -H 'Content-Type: image/jpeg' \
+      full=$(curl -s -o "$tmp/full.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
         --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass&rule=none&tiles=1x1")
       default=$(curl -s -o "$tmp/answer.json" -w '%{time_total}' -H 'Content-Type: image/jpeg' \
         --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass$(asked "$n" "$pass" "$1")")
-      tiles=$(jq -r '"\(.tiles.extracted)/\(.tiles.total)\t\(.tiles.grid)"' "$tmp/answer.json")
-      printf '%s\t%s\t%s\n' "$full" "$default" "$tiles" >>"$tmp/pairs"
+      tiles=$(jq -r '"\(.tiles.extracted)/\(.tiles.total)\t\(.tiles.grid)\t\(.stop.kind)"' "$tmp/answer.json")
+      top5() { jq -r '[.candidates[:5][].name] | join(",")' "$1"; }
+      printf '%s\t%s\t%s\t%s\t%s\t%s\n' "$full" "$default" "$tiles" "$q" \
+        "$(top5 "$tmp/full.json")" "$(top5 "$tmp/answer.json")" >>"$tmp/pairs"
     done
   done
   local full_ms default_ms per_query tiles coarse ratio
@@ -119,6 +134,15 @@ compare() {
   ratio=$(awk -v a="$default_ms" -v b="$full_ms" 'BEGIN {printf "%.3f", a / b}')
   echo "vocabulary seed $1: full search, whole image: median ${full_ms} ms; default${extra:+ ($extra)}${LATENCY_SEQUENCE:+ as the frames of a sequence}, streaming: median ${default_ms} ms"
   echo "vocabulary seed $1: ratio of medians $ratio; median per-query ratio ${per_query}; mean share of tiles extracted ${tiles}; coarse pass first in ${coarse} requests"
+  # recall@N (%) of the answers in column $1 of the pairs
+  recall() {
+    awk -F'\t' -v col="$1" -v n="$2" 'NR == FNR {if (FNR > 1) {split($0, r, ","); ok[r[1] "," r[2]] = 1}; next}
+      {split($col, c, ","); hit = 0; for (i = 1; i <= n && i in c; i++) if (($6 "," c[i]) in ok) hit = 1; h += hit}
+      END {printf "%.1f", 100 * h / FNR}' "$src/ground_truth.csv" "$tmp/pairs"
+  }
+  local orb_answered
+  orb_answered=$(awk -F'\t' '$5 == "orb-pass" {c++} END {printf "%d of %d", c, NR}' "$tmp/pairs")
+  echo "vocabulary seed $1: recall@1 full search $(recall 7 1), default $(recall 8 1); recall@5 full search $(recall 7 5), default $(recall 8 5)${LATENCY_ORB_PASS:+; answered by the ORB pass: $orb_answered}"
   echo "$1 $ratio $per_query" >>"$tmp/ratios"
 }
 
@@ -126,7 +150,8 @@ compare() {
 first=1
 for seed in $seeds; do
   dir=$(map_for "$seed")
-  server_config 1 4 "$dir" "$plan" >"$tmp/config.toml"
+  server_config 1 4 "$dir" "$plan
+$orb" >"$tmp/config.toml"
   start_server "$tmp/config.toml" "$tmp/server.log"
   # every server answers the breakdown's requests first (printed for the
   # first seed's), so a learned plan has made its trials before the

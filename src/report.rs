@@ -56,6 +56,10 @@ pub struct Localization {
     /// With `sequence`: the sequence's filtered answer.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sequence: Option<SequenceAnswer>,
+    /// When the ORB pass looked at the query first (`orb_pass`): whether it
+    /// answered. Absent when it did not run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orb_pass: Option<OrbPassUse>,
     /// With a prior: the search's posterior, which a sequence takes as its
     /// new belief (not sent).
     #[serde(skip)]
@@ -418,7 +422,20 @@ pub struct Timings {
     pub vote: f64,
     /// Geometric verification (0 without).
     pub verify: f64,
+    /// The ORB pass: ORB, its votes and checks (0 when it did not run).
+    pub orb_pass: f64,
     pub total: f64,
+}
+
+/// What the ORB pass did for a query.
+#[derive(Debug, Clone, Copy, Serialize, ToSchema)]
+pub struct OrbPassUse {
+    /// The pass answered: the candidates are its own (each one's score its
+    /// inliers) and no SIFT feature was extracted (stop kind `orb-pass`).
+    /// Otherwise the SIFT search answered after it.
+    pub answered: bool,
+    /// Best-voted map images it verified.
+    pub checked: usize,
 }
 
 pub fn ms(d: Duration) -> f64 {
@@ -552,12 +569,14 @@ impl Localization {
                 quantize: ms(t.quantize),
                 vote: ms(t.vote),
                 verify: ms(t.verify),
+                orb_pass: 0.0,
                 total: ms(edge.decode + edge.extract + t.quantize + t.vote + t.verify),
             },
             map: MapIdentity::of(map),
             verified: None,
             trace: outcome.trace.as_ref().map(RaceTrace::from),
             sequence: None,
+            orb_pass: None,
             posterior: outcome.posterior,
         }
     }
@@ -646,6 +665,56 @@ impl Localization {
         self.timings_ms.verify += ms(elapsed);
         self.timings_ms.total += ms(elapsed);
         self
+    }
+}
+
+impl Localization {
+    /// Count the ORB pass that looked at the query first: its time, and
+    /// whether it answered.
+    pub fn after_orb_pass(self, took: Duration, checked: usize) -> Self {
+        self.counting_orb_pass(took, checked, false)
+    }
+
+    fn counting_orb_pass(mut self, took: Duration, checked: usize, answered: bool) -> Self {
+        self.orb_pass = Some(OrbPassUse { answered, checked });
+        self.timings_ms.orb_pass += ms(took);
+        self.timings_ms.total += ms(took);
+        self
+    }
+
+    /// The ORB pass's answer instead of the search's: `ranked`, the picked
+    /// map image and then the other checked ones in vote order, each with
+    /// its inliers and scale from `checked`; the pick is verified. The first
+    /// `top_n` scoring at least `min_score` (inliers) are kept. The answer
+    /// must come from a search stopped before any feature
+    /// ([`crate::search::StopKind::OrbPass`]).
+    pub fn answered_by_orb_pass(
+        mut self,
+        map: &dyn MapRead,
+        ranked: &[u32],
+        checked: &[crate::orb_pass::Checked],
+        top_n: usize,
+        min_score: f32,
+        took: Duration,
+    ) -> Self {
+        let of = |id: u32| checked.iter().find(|c| c.image == id);
+        self.candidates = ranked
+            .iter()
+            .filter_map(|&id| of(id))
+            .filter(|c| c.inliers as f32 >= min_score)
+            .take(top_n)
+            .enumerate()
+            .map(|(i, k)| {
+                let mut c = Candidate::new(i + 1, k.inliers as f32, 0.0, map.image(k.image));
+                c.inliers = Some(k.inliers as u32);
+                c.verified = Some(k.image == ranked[0]);
+                c.scale = k.scale;
+                c
+            })
+            .collect();
+        self.verified = Some(self.candidates.first().is_some_and(|c| c.id == ranked[0]));
+        self.features.fraction = 0.0;
+        self.counting_orb_pass(took, checked.len(), true)
     }
 }
 

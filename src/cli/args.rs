@@ -269,6 +269,8 @@ impl SearchArgs {
             tile_order: self.tile_order,
             given_order: false,
             spare_core: None,
+            // `query --orb-pass` turns it on, with the map's ORB side
+            orb_pass: false,
         })
     }
 }

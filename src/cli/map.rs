@@ -1,6 +1,7 @@
 //! `bowloc map build`: index a set of images against a vocabulary;
 //! `bowloc map add|remove|list|compact`: change a map file's images through
-//! its change log, as the service's `/images` endpoints do.
+//! its change log, as the service's `/images` endpoints do; `bowloc map
+//! orb-pass`: a map's ORB side, for the ORB pass.
 
 use anyhow::Context;
 use bowloc::dataset::image_list;
@@ -8,6 +9,7 @@ use bowloc::geometry::packed::PACKED_BYTES;
 use bowloc::index::metadata::pose_row;
 use bowloc::index::{MapRead, Places};
 use bowloc::live::{Applied, Change, LiveMap, NewImage, now_ms};
+use bowloc::orb_pass::OrbPassParams;
 use bowloc::pipeline::Localizer;
 use bowloc::pipeline::build_map;
 use bowloc::server::images::{ImageItem, check_id};
@@ -28,6 +30,33 @@ pub enum MapCommand {
     List(ListArgs),
     /// Fold a map's change log into a new map file.
     Compact(ListArgs),
+    /// Build a map's ORB side (MAP.orbpass), for the ORB pass that answers
+    /// easy queries before SIFT (`[orb_pass]` of `bowloc serve`).
+    OrbPass(OrbPassArgs),
+}
+
+#[derive(Args)]
+pub struct OrbPassArgs {
+    /// Vocabulary file the map was built with.
+    #[arg(long)]
+    vocab: PathBuf,
+    /// Map file.
+    #[arg(long)]
+    map: PathBuf,
+    /// The image list or folder the map was built from (same order).
+    #[arg(long)]
+    images: PathBuf,
+    /// Output file (default: MAP.orbpass beside the map, where the service
+    /// looks for it).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Binary words of the side's vocabulary.
+    #[arg(long, default_value_t = OrbPassParams::default().words)]
+    words: usize,
+    /// Where ORB's keypoints come from: `none` (ORB's own strongest
+    /// corners) or `COLSxROWS` (spread over a grid of cells).
+    #[arg(long, default_value_t = OrbPassParams::default().grid)]
+    grid: String,
 }
 
 #[derive(Args)]
@@ -129,6 +158,7 @@ pub struct BuildArgs {
 pub fn run(command: MapCommand) -> anyhow::Result<()> {
     match command {
         MapCommand::Build(a) => build(a),
+        MapCommand::OrbPass(a) => orb_pass(a),
         MapCommand::Add(a) => {
             let id = match &a.id {
                 Some(id) => id.clone(),
@@ -212,6 +242,37 @@ fn build(a: BuildArgs) -> anyhow::Result<()> {
         bytes,
         geometry_bytes,
         "map written"
+    );
+    Ok(())
+}
+
+fn orb_pass(a: OrbPassArgs) -> anyhow::Result<()> {
+    let params = OrbPassParams {
+        words: a.words,
+        grid: a.grid.clone(),
+        ..OrbPassParams::default()
+    };
+    params.validate().map_err(anyhow::Error::msg)?;
+    let localizer = Localizer::open(&a.vocab, &a.map, true)?;
+    let images = image_list(&a.images)?;
+    let side = bowloc::pipeline::build_orb_side(
+        &localizer,
+        &images,
+        params.words,
+        params.grid().map_err(anyhow::Error::msg)?,
+    )?;
+    let out = a
+        .out
+        .unwrap_or_else(|| bowloc::orb_pass::file::path_beside(&a.map));
+    side.save(&out)?;
+    let features: usize = side.images.iter().map(|m| m.centres.len()).sum();
+    tracing::info!(
+        path = %out.display(),
+        images = side.images.len(),
+        features,
+        words = side.vocabulary.len(),
+        bytes = std::fs::metadata(&out).map_or(0, |f| f.len()),
+        "ORB side written"
     );
     Ok(())
 }

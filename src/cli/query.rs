@@ -34,6 +34,11 @@ pub struct QueryArgs {
     tiles: Option<TileGrid>,
     #[command(flatten)]
     verify: VerifyArgs,
+    /// Let the ORB pass look at each image first, with the map's ORB side
+    /// beside it (MAP.orbpass, from `bowloc map orb-pass`) and the
+    /// service's default setting (`[orb_pass]`).
+    #[arg(long)]
+    orb_pass: bool,
     /// Run the images, in the order given, as the frames of one camera
     /// through the sequence filter (each answer's `sequence` has the filtered
     /// candidates); frames stop by the service's sequence rule unless
@@ -51,7 +56,13 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     localizer.set_verify(a.verify.params()?);
     let model = a.model.model()?;
     let snapshot = localizer.map.snapshot();
-    let options = if a.sequence {
+    if a.orb_pass {
+        let side = bowloc::orb_pass::file::path_beside(&a.files.map);
+        let params = bowloc::orb_pass::OrbPassParams::default();
+        let pass = bowloc::pipeline::OrbPass::open(&side, snapshot.base().meta(), &params)?;
+        localizer.orb_pass = Some(pass);
+    }
+    let mut options = if a.sequence {
         // the frames stop by the sequence's rule, as the service's do
         let sequence = bowloc::server::config::SequenceConfig::default();
         let rule = sequence.rule().map_err(anyhow::Error::msg)?;
@@ -60,6 +71,7 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     } else {
         a.search.options()?
     };
+    options.orb_pass = a.orb_pass;
     let topology = Topology::of(
         TopologyKind::Auto,
         snapshot.id_range(),

@@ -5,14 +5,19 @@
 //! similarity on word pairs ([`index::OrbIndex::check`]); and a [`Setting`]
 //! says from what that check found whether the pass answers, and with which
 //! candidate ([`pick`]). A query the pass does not answer goes on to the
-//! SIFT search. Plain arrays only: the model fit is the trait
-//! [`crate::geometry::verify::ModelFit`].
+//! SIFT search. The map's ORB side is kept beside the map ([`file`]); the
+//! service's settings are [`params`](mod@params). Plain arrays only: the
+//! model fit is the trait [`crate::geometry::verify::ModelFit`].
 //!
 //! Measured in `examples/orb_pass.rs` (docs/performance.md, "An ORB pass
 //! before SIFT").
 
+pub mod file;
 pub mod index;
+pub mod params;
 pub mod pick;
 
+pub use file::{OrbSide, OrbSideMeta};
 pub use index::{Checked, OrbImage, OrbIndex};
+pub use params::{FIT, OrbPassParams};
 pub use pick::{PLACE_APART, Pick, Setting, answer};

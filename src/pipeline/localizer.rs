@@ -3,6 +3,7 @@
 //! verify the candidates and report.
 
 use super::build::map_image_words;
+use super::orb_pass::{Look, OrbPass};
 use crate::features::fit::OpenCvFit;
 use crate::features::{
     self, CoarseChoice, DecodeLimits, ExtractConfig, FeatureError, TileGrid, Tiles,
@@ -12,7 +13,7 @@ use crate::geometry::matches::QueryFeature;
 use crate::geometry::packed::PackedFeature;
 use crate::geometry::verify::{LeaderVerifier, VerifyParams, rerank, with_keypoints};
 use crate::index::{MapIndex, MapRead};
-use crate::live::{LiveMap, Opened};
+use crate::live::{LiveMap, Opened, Snapshot};
 use crate::quantize::QuantizerKind;
 use crate::report::{CandidateMatches, EdgeTimings, Extraction, ImageSize, Localization};
 use crate::search::{self, Search, SearchOptions};
@@ -106,6 +107,9 @@ pub struct Localizer {
     /// What tiles cost, learnt from the requests served (what a time budget
     /// prices the next tile with).
     tile_cost: search::budget::TileCostModel,
+    /// The map's ORB side, when the ORB pass is to look at queries first
+    /// ([`SearchOptions::orb_pass`]).
+    pub orb_pass: Option<OrbPass>,
 }
 
 impl Localizer {
@@ -145,6 +149,7 @@ impl Localizer {
             fit: OpenCvFit::new(no_verify.fit()),
             verify: no_verify,
             tile_cost: search::budget::TileCostModel::new(),
+            orb_pass: None,
         }
     }
 
@@ -363,11 +368,12 @@ impl Localizer {
         if let Some(choice) = &self.coarse_choice
             && plan.learned
             && answer.stop.kind != search::StopKind::Budget
+            && answer.stop.kind != search::StopKind::OrbPass
         {
             let t = &answer.timings_ms;
             choice.record(
                 answer.tiles.grid.coarse,
-                t.total - t.decode,
+                t.total - t.decode - t.orb_pass,
                 answer.tiles.extracted <= 1,
             );
         }
@@ -453,16 +459,35 @@ impl Localizer {
             width: image.width(),
             height: image.height(),
         };
+        let snapshot = self.map.snapshot();
+        let map: &dyn MapRead = &*snapshot;
+        // the ORB pass looks first, when it may answer
+        let look = match self.orb_pass_for(options, tracing, &snapshot) {
+            Some(pass) => Some(pass.look(&image, &self.extract)?),
+            None => None,
+        };
+        if let Some(look) = &look
+            && let Some(ranked) = &look.answer
+        {
+            return Ok(orb_answer(
+                map,
+                options,
+                grid,
+                size,
+                decoded - started,
+                look,
+                ranked,
+            ));
+        }
+        let tiling = Instant::now();
         let mut tiles = Tiles::new(
             &image,
             &self.extract,
             grid,
             Some((options.tile_order, options.seed)),
         )?;
-        let mut extract = decoded.elapsed();
+        let mut extract = tiling.elapsed();
         let quantizer = self.vocab.quantizer(self.quantizer);
-        let snapshot = self.map.snapshot();
-        let map: &dyn MapRead = &*snapshot;
         let mut search = Search::new(map, &searched);
         let mut full = None;
         if tracing != Tracing::Off {
@@ -606,7 +631,30 @@ impl Localizer {
         } else {
             answer
         };
-        Ok(answer.keeping_distinct(options.min_distinct))
+        let answer = answer.keeping_distinct(options.min_distinct);
+        Ok(match look {
+            Some(look) => answer.after_orb_pass(look.took, look.checked.len()),
+            None => answer,
+        })
+    }
+
+    /// The ORB pass, if it may answer this query: the map has its ORB side
+    /// and has not changed since it was built, the request lets it
+    /// ([`SearchOptions::orb_pass`]), and the search could stop early
+    /// anyway (not a full search, no prior to update, no trace).
+    fn orb_pass_for(
+        &self,
+        options: &SearchOptions,
+        tracing: Tracing,
+        snapshot: &Snapshot,
+    ) -> Option<&OrbPass> {
+        let pass = self.orb_pass.as_ref()?;
+        let may = options.orb_pass
+            && tracing == Tracing::Off
+            && options.prior.is_none()
+            && options.rule.info().stops_early
+            && snapshot.generation() == pass.meta.map_generation;
+        may.then_some(pass)
     }
 
     /// Read a file and answer it as a query, extracted in the grid `tiles`
@@ -626,4 +674,58 @@ impl Localizer {
         self.learn(plan, &answer);
         Ok(answer)
     }
+}
+
+/// The ORB pass's answer to a query (`ranked`, from `look`): a search
+/// stopped before its first feature, answered by the pass's candidates.
+fn orb_answer(
+    map: &dyn MapRead,
+    options: &SearchOptions,
+    grid: TileGrid,
+    size: ImageSize,
+    decode: Duration,
+    look: &Look,
+    ranked: &[u32],
+) -> Localization {
+    let mut search = Search::new(map, options);
+    let pick = look.checked.iter().find(|c| c.image == ranked[0]);
+    search.end(
+        search::StopKind::OrbPass,
+        format!(
+            "the ORB pass verified map image {} with {} inliers",
+            ranked[0],
+            pick.map_or(0, |c| c.inliers)
+        ),
+    );
+    let extraction = Extraction {
+        tiles_extracted: 0,
+        tiles_total: grid.count(),
+        grid,
+        tile_order: options.tile_order,
+        expected_features: 0.0,
+        complete: false,
+        skipped: Duration::ZERO,
+        ahead: Default::default(),
+    };
+    let edge = EdgeTimings {
+        decode,
+        extract: Duration::ZERO,
+    };
+    Localization::new(
+        map,
+        &options.rule,
+        options.seed,
+        size,
+        search.finish(),
+        edge,
+        extraction,
+    )
+    .answered_by_orb_pass(
+        map,
+        ranked,
+        &look.checked,
+        options.top_n,
+        options.min_score,
+        look.took,
+    )
 }

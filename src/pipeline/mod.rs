@@ -2,11 +2,13 @@
 //! [`extract`] reads image lists into features (timed tile by tile),
 //! [`build`] trains vocabularies and indexes maps from them, and
 //! [`localizer`] answers one query (decode → extract → search → verify →
-//! report).
+//! report), after the ORB pass's first look when the map has its ORB side
+//! ([`orb_pass`](mod@orb_pass)).
 
 pub mod build;
 pub mod extract;
 pub mod localizer;
+pub mod orb_pass;
 
 pub use build::{
     build_map, build_vocabulary, code, index_descriptors, map_image_words, quantize_all,
@@ -17,6 +19,7 @@ pub use extract::{
     extract_tiled, stack,
 };
 pub use localizer::{Localizer, Plan, TRACE_POINTS, Tracing};
+pub use orb_pass::{OrbPass, build_orb_side};
 
 use indicatif::{ProgressBar, ProgressStyle};
 

@@ -101,6 +101,10 @@ pub struct SearchOptions {
     /// together with the one after it, on that core
     /// ([`crate::features::Tiles::extract_ahead`]). `None`: one at a time.
     pub spare_core: Option<SpareCore>,
+    /// Let the ORB pass answer first, when the map has its ORB side and the
+    /// search could stop early (`crate::pipeline::orb_pass`); the search
+    /// itself ignores it.
+    pub orb_pass: bool,
 }
 
 /// Whether a core would idle now: the front end's view of its own load (the
@@ -143,6 +147,7 @@ impl Default for SearchOptions {
             given_order: false,
             finish_tile: false,
             spare_core: None,
+            orb_pass: false,
         }
     }
 }
@@ -236,15 +241,18 @@ pub enum StopKind {
     Deadline,
     /// The next tile would not have ended within the request's time budget.
     Budget,
+    /// The ORB pass answered before any SIFT feature was extracted.
+    OrbPass,
 }
 
 impl StopKind {
     /// Every kind, in the order the answers' documents list them.
-    pub const ALL: [StopKind; 4] = [
+    pub const ALL: [StopKind; 5] = [
         StopKind::Rule,
         StopKind::Exhausted,
         StopKind::Deadline,
         StopKind::Budget,
+        StopKind::OrbPass,
     ];
 
     /// How answers spell it (its serialized name).
@@ -254,6 +262,7 @@ impl StopKind {
             StopKind::Exhausted => "exhausted",
             StopKind::Deadline => "deadline",
             StopKind::Budget => "budget",
+            StopKind::OrbPass => "orb-pass",
         }
     }
 
@@ -265,6 +274,9 @@ impl StopKind {
             StopKind::Deadline => "the request's deadline passed (the answer so far)",
             StopKind::Budget => {
                 "the next tile would not have ended within the request's `budget_ms` (the answer so far)"
+            }
+            StopKind::OrbPass => {
+                "the ORB pass answered before SIFT (`orb_pass`): no SIFT feature was extracted"
             }
         }
     }

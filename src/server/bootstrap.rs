@@ -112,7 +112,70 @@ pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
     if cap > 0 && (sift.max_features == 0 || sift.max_features > cap) {
         sift.max_features = cap;
     }
+    // bootstrap writes the default map's side where it looks for it
+    let bootstraps =
+        own_files && config.bootstrap.enabled && config.orb_pass.file.as_os_str().is_empty();
+    localizer.orb_pass = load_orb_pass(config, &localizer, bootstraps, progress)?;
     Ok(localizer)
+}
+
+/// The map's ORB side for the ORB pass: opened when its file exists
+/// (requests may then ask for the pass with `orb_pass=true`). When
+/// `orb_pass.enabled`, a missing side is an error, except that bootstrap
+/// builds the default map's (`bootstraps`; also when it was built for
+/// another map). A side built for another map (or before the map's
+/// changes were folded into it) is left out with a warning: the service
+/// answers without the pass until it is rebuilt.
+fn load_orb_pass(
+    config: &Config,
+    localizer: &Localizer,
+    bootstraps: bool,
+    progress: &Progress,
+) -> anyhow::Result<Option<crate::pipeline::OrbPass>> {
+    let (path, params) = (config.orb_pass_file(), &config.orb_pass);
+    let snapshot = localizer.map.snapshot();
+    let map = snapshot.base().meta();
+    let built_for_map =
+        || crate::orb_pass::OrbSide::open(&path).is_ok_and(|side| side.meta.matches(map));
+    if params.enabled && bootstraps && !built_for_map() {
+        let list = config.bootstrap.dataset.join("map.txt");
+        progress.begin("the map's ORB side");
+        tracing::info!(path = %path.display(), "bootstrap: building the map's ORB side");
+        let side = crate::pipeline::build_orb_side(
+            localizer,
+            &image_list(&list)?,
+            params.words,
+            params.grid().map_err(anyhow::Error::msg)?,
+        )?;
+        side.save(&path)?;
+    }
+    if !path.exists() {
+        if params.enabled {
+            bail!(
+                "{} is missing and orb_pass.enabled is set: build the map's ORB side with \
+                 `bowloc map orb-pass --vocab {} --map {} --images IMAGES` (the map's image list)",
+                path.display(),
+                config.files.vocabulary.display(),
+                config.files.map.display()
+            );
+        }
+        return Ok(None);
+    }
+    match crate::pipeline::OrbPass::open(&path, map, params) {
+        Ok(pass) => {
+            tracing::info!(
+                path = %path.display(),
+                images = pass.meta.map_images,
+                enabled = params.enabled,
+                "ORB pass loaded"
+            );
+            Ok(Some(pass))
+        }
+        Err(e) => {
+            tracing::warn!("{e:#}: the ORB pass is off");
+            Ok(None)
+        }
+    }
 }
 
 /// The vocabulary and map, the map with its change log (replayed) when

@@ -40,6 +40,8 @@ pub struct Config {
     pub auth: AuthConfig,
     /// The map's changes: compaction and size cap.
     pub changes: ChangesConfig,
+    /// The ORB pass: a cheap first look before SIFT, from the map's ORB side.
+    pub orb_pass: crate::orb_pass::OrbPassParams,
 }
 
 /// Sequences: their bounds, the map's topology and the filter's model
@@ -683,6 +685,9 @@ impl Config {
         if let Err(e) = self.verify.validate() {
             return bad("verify", e);
         }
+        if let Err(e) = self.orb_pass.validate() {
+            return bad("orb_pass", e);
+        }
         let q = &self.sequence;
         if let Err(e) = q.model().check() {
             return bad("sequence", e);
@@ -761,7 +766,17 @@ impl Config {
             finish_tile: false,
             // set per request, from the pool's load
             spare_core: None,
+            orb_pass: self.orb_pass.enabled,
         })
+    }
+
+    /// The map's ORB side: `orb_pass.file`, else `MAP.orbpass` beside the
+    /// map.
+    pub fn orb_pass_file(&self) -> std::path::PathBuf {
+        match self.orb_pass.file.as_os_str().is_empty() {
+            true => crate::orb_pass::file::path_beside(&self.files.map),
+            false => self.orb_pass.file.clone(),
+        }
     }
 
     /// The default rule with its parameter and verified stop: those given,

@@ -34,6 +34,7 @@ pub const STOPS: &str = "bowloc_localize_stops_total";
 pub const VERIFY_DURATION: &str = "bowloc_verify_duration_seconds";
 pub const VERIFY_INLIERS: &str = "bowloc_verify_top_inliers";
 pub const VERIFIED: &str = "bowloc_verify_answers_total";
+pub const ORB_PASS: &str = "bowloc_orb_pass_queries_total";
 pub const WORKERS: &str = "bowloc_workers";
 pub const WORKERS_BUSY: &str = "bowloc_workers_busy";
 pub const QUEUE_WAITING: &str = "bowloc_queue_waiting";
@@ -121,7 +122,7 @@ fn describe() {
     describe_histogram!(
         STAGE_DURATION,
         Unit::Seconds,
-        "Time per stage of a localization: decode, extract, quantize and vote."
+        "Time per stage of a localization: decode, extract, quantize and vote, and the ORB pass (orb_pass) when it ran."
     );
     describe_histogram!(
         RATIO_USED,
@@ -157,6 +158,10 @@ fn describe() {
     describe_counter!(
         VERIFIED,
         "Verified queries by whether the best candidate was verified (true/false)."
+    );
+    describe_counter!(
+        ORB_PASS,
+        "Queries the ORB pass looked at first, by whether it answered them without SIFT (true/false)."
     );
     describe_gauge!(WORKERS, "Worker threads for CPU work.");
     describe_gauge!(WORKERS_BUSY, "Workers running a query now.");
@@ -266,8 +271,9 @@ fn zero_counters() {
     for kind in StopKind::ALL {
         counter!(STOPS, "kind" => kind.name()).absolute(0);
     }
-    for verified in ["true", "false"] {
-        counter!(VERIFIED, "verified" => verified).absolute(0);
+    for flag in ["true", "false"] {
+        counter!(VERIFIED, "verified" => flag).absolute(0);
+        counter!(ORB_PASS, "answered" => flag).absolute(0);
     }
     for plan in crate::features::CoarseChoice::PLANS {
         counter!(PLAN_REQUESTS, "plan" => plan).absolute(0);
@@ -359,6 +365,10 @@ pub fn localized(answer: &Localization) {
         let top = answer.candidates.first().and_then(|c| c.inliers);
         histogram!(VERIFY_INLIERS).record(top.unwrap_or(0) as f64);
         counter!(VERIFIED, "verified" => verified.to_string()).increment(1);
+    }
+    if let Some(pass) = answer.orb_pass {
+        histogram!(STAGE_DURATION, "stage" => "orb_pass").record(t.orb_pass / 1e3);
+        counter!(ORB_PASS, "answered" => pass.answered.to_string()).increment(1);
     }
 }
 

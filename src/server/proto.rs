@@ -49,6 +49,7 @@ impl From<&Localization> for pb::Localization {
                 quantize: a.timings_ms.quantize,
                 vote: a.timings_ms.vote,
                 verify: a.timings_ms.verify,
+                orb_pass: a.timings_ms.orb_pass,
                 total: a.timings_ms.total,
             }),
             map: Some(pb::MapIdentity {
@@ -60,6 +61,10 @@ impl From<&Localization> for pb::Localization {
             verified: a.verified,
             trace: a.trace.as_ref().map(trace),
             sequence: a.sequence.as_ref().map(sequence),
+            orb_pass: a.orb_pass.map(|u| pb::OrbPassUse {
+                answered: u.answered,
+                checked: u.checked as u32,
+            }),
         }
     }
 }

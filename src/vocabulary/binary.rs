@@ -74,6 +74,11 @@ impl BinaryVocabulary {
         Self { words }
     }
 
+    /// Words as given (as read from a file).
+    pub fn from_words(words: Vec<BinaryDescriptor>) -> Self {
+        Self { words }
+    }
+
     /// The words as trained.
     pub fn words(&self) -> &[BinaryDescriptor] {
         &self.words

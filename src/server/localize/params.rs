@@ -92,6 +92,15 @@ pub struct LocalizeParams {
     /// inliers of the candidate's place (its own and its checked neighbours').
     #[param(value_type = Option<bool>)]
     pub verify: Option<String>,
+    /// Let the ORB pass look first (`true` or `false`; default from
+    /// `orb_pass.enabled`): ORB's words voted over the map's ORB side and
+    /// the best-voted images verified; a verified one at the query's scale
+    /// answers without SIFT (stop kind `orb-pass`). It runs only when the
+    /// map has its ORB side, for a search that may stop early, without
+    /// `sequence`, `near` or `trace`; the answer's `orb_pass` says whether it
+    /// ran and answered.
+    #[param(value_type = Option<bool>)]
+    pub orb_pass: Option<String>,
     /// Return the vote race in `trace` (`true`): the leader's and the
     /// runner-up's votes, the mean vote and the rule's statistic against its
     /// threshold as the features arrived (at most 256 points). `full` also
@@ -179,6 +188,7 @@ impl LocalizeParams {
             }
             o.top_n = n;
         }
+        o.orb_pass = flag("orb_pass", self.orb_pass.as_deref(), o.orb_pass)?;
         o.seed = match &self.seed {
             // the API document's int64
             Some(v) => whole("seed", v, i64::MAX as u64)?,
@@ -296,15 +306,7 @@ impl LocalizeParams {
 
     /// Whether to verify, on top of the configured default.
     pub fn verify(&self, default: bool) -> Result<bool, ApiError> {
-        match self.verify.as_deref().map(str::trim) {
-            None => Ok(default),
-            Some("true") => Ok(true),
-            Some("false") => Ok(false),
-            Some(v) => Err(ApiError::invalid_parameter(
-                "verify",
-                format!("`{v}` is not `true` or `false`"),
-            )),
-        }
+        flag("verify", self.verify.as_deref(), default)
     }
 
     /// What to record of the vote race.
@@ -353,6 +355,19 @@ impl LocalizeParams {
         }
         rule.or_verified(inliers)
             .map_err(|e| ApiError::invalid_parameter(OR_VERIFIED, e))
+    }
+}
+
+/// A `true` or `false` parameter, `default` when absent.
+fn flag(name: &str, value: Option<&str>, default: bool) -> Result<bool, ApiError> {
+    match value.map(str::trim) {
+        None => Ok(default),
+        Some("true") => Ok(true),
+        Some("false") => Ok(false),
+        Some(v) => Err(ApiError::invalid_parameter(
+            name,
+            format!("`{v}` is not `true` or `false`"),
+        )),
     }
 }
 
@@ -600,6 +615,20 @@ mod tests {
         assert!(p("verify=true").verify(false).unwrap());
         assert!(!p("verify=false").verify(true).unwrap());
         assert_eq!(p("verify=1").verify(true).unwrap_err().status, 400);
+        let orb = |q: &str, enabled: bool| {
+            let defaults = Defaults {
+                options: SearchOptions {
+                    orb_pass: enabled,
+                    ..SearchOptions::default()
+                },
+                max_top_n: 10,
+            };
+            p(q).options(&defaults).map(|o| o.orb_pass)
+        };
+        assert!(orb("", true).unwrap());
+        assert!(!orb("orb_pass=false", true).unwrap());
+        assert!(orb("orb_pass=true", false).unwrap());
+        assert_eq!(orb("orb_pass=yes", false).unwrap_err().status, 400);
     }
 
     #[test]

@@ -1,0 +1,170 @@
+//! The ORB pass in the pipeline: a map's ORB side made from its images
+//! ([`build_orb_side`]), and a loaded side ([`OrbPass`]) that looks at a
+//! decoded query before SIFT does ([`OrbPass::look`]).
+
+use super::Localizer;
+use super::progress_bar;
+use crate::dataset::ImageRef;
+use crate::features::fit::OpenCvFit;
+use crate::features::orb::OrbDetector;
+use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Frame, GrayImage};
+use crate::index::MapMeta;
+use crate::orb_pass::{
+    Checked, FIT, OrbImage, OrbIndex, OrbPassParams, OrbSide, OrbSideMeta, Setting, answer,
+};
+use crate::vocabulary::binary::{BinaryDescriptor, BinaryVocabulary};
+use anyhow::{Context, bail};
+use rayon::prelude::*;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Rounds of k-majority when the side's words are trained.
+const ITERATIONS: usize = 8;
+
+/// ORB of a decoded image in the extraction frame of `config`.
+pub fn orb_of(
+    image: &GrayImage,
+    config: &ExtractConfig,
+    detector: &mut OrbDetector,
+) -> Result<OrbImage, FeatureError> {
+    detector.detect(&mut Frame::new(image, config)?)
+}
+
+/// The ORB side of `localizer`'s map file, built from its images
+/// (`images`, in map order: each one's name must be the map image's) in the
+/// extraction frame of its vocabulary: ORB over every image (an unreadable
+/// one has none), then `words` binary words drawn with the vocabulary's
+/// seed.
+pub fn build_orb_side(
+    localizer: &Localizer,
+    images: &[ImageRef],
+    words: usize,
+    grid: Option<(usize, usize)>,
+) -> anyhow::Result<OrbSide> {
+    let snapshot = localizer.map.snapshot();
+    let base = snapshot.base();
+    let map = base.meta();
+    let (config, seed) = (&localizer.extract, localizer.vocab.meta().seed);
+    if images.len() != map.images {
+        bail!(
+            "{} images given for a map of {} images: give the list the map was built from",
+            images.len(),
+            map.images
+        );
+    }
+    if let Some((j, image)) = images
+        .iter()
+        .enumerate()
+        .find(|(j, image)| image.name != base.image(*j as u32).name)
+    {
+        bail!(
+            "image {j} is {} but the map's image {j} is {}: give the list the map was built from",
+            image.name,
+            base.image(j as u32).name
+        );
+    }
+    OrbDetector::new(grid)?;
+    let bar = progress_bar(images.len() as u64, "ORB over the map");
+    let orb: Vec<OrbImage> = images
+        .par_iter()
+        .map(|r| {
+            let read = || -> anyhow::Result<OrbImage> {
+                let bytes = std::fs::read(&r.path)
+                    .with_context(|| format!("{}: cannot read", r.path.display()))?;
+                let image = features::decode(&bytes, DecodeLimits::default(), config.max_side)?;
+                Ok(orb_of(&image, config, &mut OrbDetector::new(grid)?)?)
+            };
+            let orb = read().unwrap_or_else(|e| {
+                tracing::warn!("{e:#}: no ORB features for it");
+                OrbImage::default()
+            });
+            bar.inc(1);
+            orb
+        })
+        .collect();
+    bar.finish_and_clear();
+    let all: Vec<BinaryDescriptor> = orb
+        .iter()
+        .flat_map(|m| m.descriptors.iter().copied())
+        .collect();
+    let vocabulary = BinaryVocabulary::train(&all, words, ITERATIONS, seed);
+    Ok(OrbSide {
+        meta: OrbSideMeta::for_map(map, vocabulary.len(), seed, grid),
+        vocabulary,
+        images: orb,
+    })
+}
+
+/// What the pass saw of one query.
+#[derive(Debug, Clone)]
+pub struct Look {
+    /// The checked candidates, in vote order.
+    pub checked: Vec<Checked>,
+    /// The pass's answer (the pick first, then the other checked images in
+    /// vote order), when it answers.
+    pub answer: Option<Vec<u32>>,
+    /// ORB, its words, the votes and the checks.
+    pub took: Duration,
+}
+
+/// A map's ORB side, loaded, with the setting it answers by.
+pub struct OrbPass {
+    pub meta: OrbSideMeta,
+    vocabulary: BinaryVocabulary,
+    index: OrbIndex,
+    pub setting: Setting,
+    top: usize,
+    fit: OpenCvFit,
+}
+
+impl OrbPass {
+    /// Open the side at `path` for the map `map` (refused if it was built
+    /// for another map, or the map has changed since).
+    pub fn open(path: &Path, map: &MapMeta, params: &OrbPassParams) -> anyhow::Result<Self> {
+        let side = OrbSide::open(path)?;
+        if !side.meta.matches(map) {
+            bail!(
+                "{}: this ORB side was built for map `{}` ({} images, {} features, generation {}), \
+                 not for the map loaded (`{}`, {} images, {} features, generation {}); rebuild it \
+                 with `bowloc map orb-pass --vocab VOCAB --map MAP --images IMAGES`",
+                path.display(),
+                side.meta.map_name,
+                side.meta.map_images,
+                side.meta.map_features,
+                side.meta.map_generation,
+                map.name,
+                map.images,
+                map.features,
+                map.generation
+            );
+        }
+        Ok(Self::new(side, params))
+    }
+
+    /// A side in memory, with `params`' setting.
+    pub fn new(side: OrbSide, params: &OrbPassParams) -> Self {
+        Self {
+            index: OrbIndex::build(side.images, &side.vocabulary),
+            meta: side.meta,
+            vocabulary: side.vocabulary,
+            setting: params.setting(),
+            top: params.top,
+            fit: OpenCvFit::new(FIT),
+        }
+    }
+
+    /// Look at a decoded query: ORB in the extraction frame of `config`, its
+    /// words voted over the map, the best-voted checked, and the setting's
+    /// answer if it answers.
+    pub fn look(&self, image: &GrayImage, config: &ExtractConfig) -> Result<Look, FeatureError> {
+        let started = Instant::now();
+        let query = orb_of(image, config, &mut OrbDetector::new(self.meta.grid)?)?;
+        let words = self.vocabulary.words_of(&query.descriptors);
+        let checked = self.index.check(&query, &words, self.top, &self.fit);
+        Ok(Look {
+            answer: answer(&checked, self.setting),
+            checked,
+            took: started.elapsed(),
+        })
+    }
+}
