@@ -96,14 +96,15 @@ breakdown() {
         --data-binary @"$src/$q" "http://$SERVER_ADDR/localize?seed=$pass$(asked "$n" "$pass" breakdown)")
       jq -r --arg c "$client" '[($c | tonumber) * 1000, .timings_ms.decode, .timings_ms.extract,
         .timings_ms.quantize, .timings_ms.vote, .timings_ms.total, .features.fraction,
-        (.timings_ms.verify // 0), (if .verified == null then "no" else "yes" end)] | @tsv' \
+        (.timings_ms.verify // 0), (if .verified == null then "no" else "yes" end),
+        (.timings_ms.orb_pass // 0)] | @tsv' \
         "$tmp/answer.json" >>"$tmp/rows"
     done
   done
   local share
   share=$(awk -F'\t' '{print 100 * ($1 - $3) / $1}' "$tmp/rows" | median)
   echo "dataset=$name requests=$(wc -l <"$tmp/rows") rule=$(jq -r '.rule.name + " " + (.rule.value | tostring) + (if .rule.or_verified then " or verified \(.rule.or_verified)" else "" end)' "$tmp/answer.json")"
-  echo "median_ms request=$(col 1) decode=$(col 2) extract=$(col 3) quantize=$(col 4) vote=$(col 5) verify=$(col 8) server_total=$(col 6) fraction_used=$(col 7)"
+  echo "median_ms request=$(col 1) decode=$(col 2) extract=$(col 3) quantize=$(col 4) vote=$(col 5) verify=$(col 8)${LATENCY_ORB_PASS:+ orb_pass=$(col 10)} server_total=$(col 6) fraction_used=$(col 7)"
   echo "verified (geometric verification ran): $(cut -f9 "$tmp/rows" | grep -c yes) of $(wc -l <"$tmp/rows") requests"
   echo "median share of a request that is not SIFT extraction: ${share}%"
 }

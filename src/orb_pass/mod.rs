@@ -5,7 +5,7 @@
 //! similarity on word pairs ([`index::OrbIndex::check`]); and a [`Setting`]
 //! says from what that check found whether the pass answers, and with which
 //! candidate ([`pick`]). A query the pass does not answer goes on to the
-//! SIFT search. The map's ORB side is kept beside the map ([`file`]); the
+//! SIFT search. The map's ORB side is kept beside the map ([`file`](mod@file)); the
 //! service's settings are [`params`](mod@params). Plain arrays only: the
 //! model fit is the trait [`crate::geometry::verify::ModelFit`].
 //!
