@@ -684,15 +684,17 @@ impl Localization {
 
     /// The ORB pass's answer instead of the search's: `ranked`, the picked
     /// map image and then the other checked ones in vote order, each with
-    /// its inliers and scale from `checked`; the pick is verified. The first
-    /// `top_n` scoring at least `min_score` (inliers) are kept. The answer
-    /// must come from a search stopped before any feature
-    /// ([`crate::search::StopKind::OrbPass`]).
+    /// its inliers and scale from `checked`, verified when it has `floor`
+    /// inliers. The first `top_n` scoring at least `min_score` (inliers)
+    /// are kept. The answer must come from a search stopped before any
+    /// feature ([`crate::search::StopKind::OrbPass`]).
+    #[allow(clippy::too_many_arguments)]
     pub fn answered_by_orb_pass(
         mut self,
         map: &dyn MapRead,
         ranked: &[u32],
         checked: &[crate::orb_pass::Checked],
+        floor: usize,
         top_n: usize,
         min_score: f32,
         took: Duration,
@@ -707,7 +709,7 @@ impl Localization {
             .map(|(i, k)| {
                 let mut c = Candidate::new(i + 1, k.inliers as f32, 0.0, map.image(k.image));
                 c.inliers = Some(k.inliers as u32);
-                c.verified = Some(k.image == ranked[0]);
+                c.verified = Some(k.inliers >= floor);
                 c.scale = k.scale;
                 c
             })

@@ -108,6 +108,10 @@ async fn the_pass_answers_easy_queries_without_sift_and_leaves_the_rest() {
             let floor = OrbPassParams::default().floor as u64;
             assert!(first["inliers"].as_u64().unwrap() >= floor, "{first}");
             assert_eq!(first["score"].as_f64(), first["inliers"].as_f64());
+            for c in a["candidates"].as_array().unwrap() {
+                let inliers = c["inliers"].as_u64().unwrap();
+                assert_eq!(c["verified"], inliers >= floor, "{c}");
+            }
             let id = first["id"].as_u64().unwrap() as u32;
             right += usize::from(data.truth[q].contains(&id));
         } else {

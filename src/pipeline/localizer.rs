@@ -724,6 +724,7 @@ fn orb_answer(
         map,
         ranked,
         &look.checked,
+        look.floor,
         options.top_n,
         options.min_score,
         look.took,

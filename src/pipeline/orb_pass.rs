@@ -105,6 +105,9 @@ pub struct Look {
     pub answer: Option<Vec<u32>>,
     /// ORB, its words, the votes and the checks.
     pub took: Duration,
+    /// Inliers a checked image needs to count as verified (the setting's
+    /// floor).
+    pub floor: usize,
 }
 
 /// A map's ORB side, loaded, with the setting it answers by.
@@ -165,6 +168,7 @@ impl OrbPass {
             answer: answer(&checked, self.setting),
             checked,
             took: started.elapsed(),
+            floor: self.setting.floor,
         })
     }
 }
