@@ -22,8 +22,9 @@
 //!   each map feature's word, keypoint and signature.
 //! - [`orb_pass`] — a cheap first look before SIFT: ORB's binary words voted
 //!   over the map's ORB side, the best candidates verified by a similarity,
-//!   and the setting that says whether that answers the query (measured in
-//!   `examples/orb_pass.rs`; not yet in the service).
+//!   and the setting that says whether that answers the query; the map's
+//!   ORB side on disk. Run by the service when `[orb_pass]` enables it
+//!   ([`pipeline::orb_pass`]), measured in `examples/orb_pass.rs`.
 //! - [`live`] — live maps: images added and removed while serving, a
 //!   durable change log beside the map file, compaction into a new file.
 //! - [`store`] — the memory-mapped, checksummed file format both are kept in.

@@ -461,11 +461,17 @@ impl Localizer {
         };
         let snapshot = self.map.snapshot();
         let map: &dyn MapRead = &*snapshot;
-        // the ORB pass looks first, when it may answer
-        let look = match self.orb_pass_for(options, tracing, &snapshot) {
-            Some(pass) => Some(pass.look(&image, &self.extract)?),
-            None => None,
-        };
+        // the ORB pass looks first, when it may answer; if it fails, SIFT
+        // answers as without it
+        let look = self
+            .orb_pass_for(options, tracing, &snapshot)
+            .and_then(|pass| match pass.look(&image, &self.extract) {
+                Ok(look) => Some(look),
+                Err(e) => {
+                    tracing::warn!("the ORB pass failed ({e}); the SIFT search answers");
+                    None
+                }
+            });
         if let Some(look) = &look
             && let Some(ranked) = &look.answer
         {
