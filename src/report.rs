@@ -581,6 +581,14 @@ impl Localization {
         }
     }
 
+    /// Whether the best candidate is verified.
+    fn first_verified(&self) -> bool {
+        self.candidates
+            .first()
+            .and_then(|c| c.verified)
+            .unwrap_or(false)
+    }
+
     /// Drop the candidates whose distinctness is below `min` and rank the
     /// others 1, 2, …; `verified` then speaks of the new best candidate.
     pub fn keeping_distinct(mut self, min: f32) -> Self {
@@ -597,12 +605,7 @@ impl Localization {
             trace.matches.retain(|m| kept.iter().any(|c| c.id == m.id));
         }
         if self.verified.is_some() {
-            self.verified = Some(
-                self.candidates
-                    .first()
-                    .and_then(|c| c.verified)
-                    .unwrap_or(false),
-            );
+            self.verified = Some(self.first_verified());
         }
         self
     }
@@ -656,12 +659,7 @@ impl Localization {
                 c
             })
             .collect();
-        self.verified = Some(
-            self.candidates
-                .first()
-                .and_then(|c| c.verified)
-                .unwrap_or(false),
-        );
+        self.verified = Some(self.first_verified());
         self.timings_ms.verify += ms(elapsed);
         self.timings_ms.total += ms(elapsed);
         self
@@ -714,7 +712,7 @@ impl Localization {
                 c
             })
             .collect();
-        self.verified = Some(self.candidates.first().is_some_and(|c| c.id == ranked[0]));
+        self.verified = Some(self.first_verified());
         self.features.fraction = 0.0;
         self.counting_orb_pass(took, checked.len(), true)
     }

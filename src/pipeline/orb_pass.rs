@@ -63,6 +63,7 @@ pub fn build_orb_side(
             base.image(j as u32).name
         );
     }
+    // a grid ORB cannot spread over is named before any image is read
     OrbDetector::new(grid)?;
     let bar = progress_bar(images.len() as u64, "ORB over the map");
     let orb: Vec<OrbImage> = images
