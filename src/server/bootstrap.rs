@@ -135,47 +135,43 @@ fn load_orb_pass(
     let (path, params) = (config.orb_pass_file(), &config.orb_pass);
     let snapshot = localizer.map.snapshot();
     let map = snapshot.base().meta();
-    let built_for_map =
-        || crate::orb_pass::OrbSide::open(&path).is_ok_and(|side| side.meta.matches(map));
-    if params.enabled && bootstraps && !built_for_map() {
-        let list = config.bootstrap.dataset.join("map.txt");
-        progress.begin("the map's ORB side");
-        tracing::info!(path = %path.display(), "bootstrap: building the map's ORB side");
-        let side = crate::pipeline::build_orb_side(
-            localizer,
-            &image_list(&list)?,
-            params.words,
-            params.grid().map_err(anyhow::Error::msg)?,
-        )?;
-        side.save(&path)?;
-    }
-    if !path.exists() {
-        if params.enabled {
-            bail!(
-                "{} is missing and orb_pass.enabled is set: build the map's ORB side with \
-                 `bowloc map orb-pass --vocab {} --map {} --images IMAGES` (the map's image list)",
-                path.display(),
-                config.files.vocabulary.display(),
-                config.files.map.display()
-            );
+    // the side is read once: built for this map, it is the pass
+    let opened = crate::pipeline::OrbPass::open(&path, map, params);
+    let pass = match opened {
+        Ok(pass) => pass,
+        Err(_) if params.enabled && bootstraps => {
+            let list = config.bootstrap.dataset.join("map.txt");
+            progress.begin("the map's ORB side");
+            tracing::info!(path = %path.display(), "bootstrap: building the map's ORB side");
+            let side = crate::pipeline::build_orb_side(
+                localizer,
+                &image_list(&list)?,
+                params.words,
+                params.grid().map_err(anyhow::Error::msg)?,
+            )?;
+            side.save(&path)?;
+            crate::pipeline::OrbPass::new(side, params)
         }
-        return Ok(None);
-    }
-    match crate::pipeline::OrbPass::open(&path, map, params) {
-        Ok(pass) => {
-            tracing::info!(
-                path = %path.display(),
-                images = pass.meta.map_images,
-                enabled = params.enabled,
-                "ORB pass loaded"
-            );
-            Ok(Some(pass))
-        }
+        Err(_) if !path.exists() && params.enabled => bail!(
+            "{} is missing and orb_pass.enabled is set: build the map's ORB side with \
+             `bowloc map orb-pass --vocab {} --map {} --images IMAGES` (the map's image list)",
+            path.display(),
+            config.files.vocabulary.display(),
+            config.files.map.display()
+        ),
+        Err(_) if !path.exists() => return Ok(None),
         Err(e) => {
             tracing::warn!("{e:#}: the ORB pass is off");
-            Ok(None)
+            return Ok(None);
         }
-    }
+    };
+    tracing::info!(
+        path = %path.display(),
+        images = pass.meta.map_images,
+        enabled = params.enabled,
+        "ORB pass loaded"
+    );
+    Ok(Some(pass))
 }
 
 /// The vocabulary and map, the map with its change log (replayed) when
