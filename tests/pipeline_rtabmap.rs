@@ -475,13 +475,14 @@ fn a_time_budget_ends_the_search_at_a_tile_end() {
         assert_eq!(whole.features.used, whole.features.total, "{}", q.name);
     }
     // the searches that went through their tiles taught the localizer what
-    // a keypoint costs here: something, and less than a millisecond
+    // a keypoint costs here: no longer the prior, and less than a
+    // millisecond (not asserted above zero: on a machine busy with other
+    // tests, tiles' times within a request can fall as their keypoints
+    // rise, and the model never prices a keypoint below zero; the slope
+    // itself is learnt in src/search/budget.rs's unit tests)
     let learnt = localizer.tile_cost().per_keypoint();
     assert_ne!(learnt, bowloc::search::budget::TileCostModel::PRIOR);
-    assert!(
-        learnt > Duration::ZERO && learnt < Duration::from_millis(1),
-        "{learnt:?}"
-    );
+    assert!(learnt < Duration::from_millis(1), "{learnt:?}");
     // and what the first tiles take, the richest first costing most: a
     // budget too tight for three starts with the coarse pass; a loose one,
     // or none, keeps the configured tiles

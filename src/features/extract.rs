@@ -82,6 +82,16 @@ impl Frame {
         (&self.mat, &mut self.sift)
     }
 
+    /// The extraction frame's pixels.
+    pub(super) fn pixels(&self) -> &Mat {
+        &self.mat
+    }
+
+    /// Keypoints the whole frame may keep (0 = all).
+    pub(super) fn max_features(&self) -> usize {
+        self.sift_config.max_features as usize
+    }
+
     /// Width and height of the extraction frame.
     pub fn size(&self) -> (u32, u32) {
         frame_size(&self.mat)

@@ -3,14 +3,12 @@
 //! ORB's own strongest corners or corners spread over a grid of cells.
 
 use super::{FeatureError, Frame};
+pub use crate::orb_pass::ORB_FEATURES;
 use crate::orb_pass::OrbImage;
 use crate::vocabulary::binary::from_rows;
 use opencv::core::{KeyPoint, Mat, Ptr, Vector, no_array};
 use opencv::features2d::{ORB, ORB_ScoreType};
 use opencv::prelude::*;
-
-/// Keypoints an image keeps.
-pub const ORB_FEATURES: usize = 1000;
 
 /// An ORB detector, and the cells its keypoints are spread over (`None`:
 /// ORB's own strongest corners, wherever they are).
@@ -47,8 +45,8 @@ impl OrbDetector {
     }
 
     /// ORB of the extraction frame.
-    pub fn detect(&mut self, frame: &mut Frame) -> Result<OrbImage, FeatureError> {
-        let (mat, _) = frame.parts();
+    pub fn detect(&mut self, frame: &Frame) -> Result<OrbImage, FeatureError> {
+        let mat = frame.pixels();
         let (mut keys, mut raw) = (Vector::<KeyPoint>::new(), Mat::default());
         match self.grid {
             None => self
@@ -102,9 +100,9 @@ mod tests {
         let bytes = warm_up_image(&config, DecodeLimits::default().max_pixels).unwrap();
         let image = decode(&bytes, DecodeLimits::default(), config.max_side).unwrap();
         for grid in [None, Some((4, 3))] {
-            let mut frame = Frame::new(&image, &config).unwrap();
+            let frame = Frame::new(&image, &config).unwrap();
             let (w, h) = frame.size();
-            let orb = OrbDetector::new(grid).unwrap().detect(&mut frame).unwrap();
+            let orb = OrbDetector::new(grid).unwrap().detect(&frame).unwrap();
             assert!(!orb.centres.is_empty(), "{grid:?}: no ORB keypoints");
             assert!(orb.centres.len() <= ORB_FEATURES);
             assert_eq!(orb.centres.len(), orb.descriptors.len());
@@ -130,8 +128,8 @@ mod tests {
         let mut png = Vector::<u8>::new();
         opencv::imgcodecs::imencode(".png", &flat, &mut png, &Vector::new()).unwrap();
         let image = decode(png.as_slice(), DecodeLimits::default(), config.max_side).unwrap();
-        let mut frame = Frame::new(&image, &config).unwrap();
-        let orb = OrbDetector::new(None).unwrap().detect(&mut frame).unwrap();
+        let frame = Frame::new(&image, &config).unwrap();
+        let orb = OrbDetector::new(None).unwrap().detect(&frame).unwrap();
         assert_eq!(orb, OrbImage::default());
     }
 }

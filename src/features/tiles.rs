@@ -287,7 +287,16 @@ impl Tiles {
         grid: TileGrid,
         order: Option<(TileOrder, u64)>,
     ) -> Result<Self, FeatureError> {
-        let frame = Frame::new(image, config)?;
+        Self::of_frame(Frame::new(image, config)?, grid, order)
+    }
+
+    /// [`Tiles::new`] of an image already in its extraction frame (one an
+    /// earlier look at the query made).
+    pub fn of_frame(
+        frame: Frame,
+        grid: TileGrid,
+        order: Option<(TileOrder, u64)>,
+    ) -> Result<Self, FeatureError> {
         let (w, h) = frame.size();
         let cores = grid.cores(w, h);
         let n = cores.len() + usize::from(grid.coarse);
@@ -333,7 +342,7 @@ impl Tiles {
                 Unit::Tile(i) => shares[i + coarse],
             })
             .collect();
-        let cap = config.sift.max_features as usize;
+        let cap = frame.max_features();
         Ok(Self {
             margin: if cores.len() == 1 { 0 } else { grid.margin },
             frame,

@@ -21,3 +21,7 @@ pub use file::{OrbSide, OrbSideMeta};
 pub use index::{Checked, OrbImage, OrbIndex};
 pub use params::{FIT, OrbPassParams};
 pub use pick::{PLACE_APART, Pick, Setting, answer};
+
+/// ORB keypoints a query or map image keeps, and so the most cells a grid
+/// may spread them over.
+pub const ORB_FEATURES: usize = 1000;

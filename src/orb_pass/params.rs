@@ -2,7 +2,7 @@
 //! ([`OrbPassParams`]), and the similarity its candidates are verified with
 //! ([`FIT`]).
 
-use super::{Pick, Setting};
+use super::{ORB_FEATURES, Pick, Setting};
 use crate::geometry::verify::{Estimator, FitParams, Model};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -64,16 +64,19 @@ impl Default for OrbPassParams {
     }
 }
 
-/// `none`, or `COLSxROWS` with 1 to 1000 cells.
+/// `none`, or `COLSxROWS` with 1 to [`ORB_FEATURES`] cells.
 pub fn parse_grid(v: &str) -> Result<Option<(usize, usize)>, String> {
     if v == "none" {
         return Ok(None);
     }
     v.split_once('x')
         .and_then(|(c, r)| Some((c.parse().ok()?, r.parse().ok()?)))
-        .filter(|&(c, r): &(usize, usize)| (1..=1000).contains(&(c * r)))
+        .filter(|&(c, r): &(usize, usize)| {
+            c.checked_mul(r)
+                .is_some_and(|n| (1..=ORB_FEATURES).contains(&n))
+        })
         .map(Some)
-        .ok_or_else(|| format!("`{v}`: want COLSxROWS (1 to 1000 cells) or none"))
+        .ok_or_else(|| format!("`{v}`: want COLSxROWS (1 to {ORB_FEATURES} cells) or none"))
 }
 
 impl OrbPassParams {
@@ -173,5 +176,8 @@ mod tests {
         );
         assert_eq!(parse_grid("4x3"), Ok(Some((4, 3))));
         assert!(parse_grid("0x3").is_err());
+        assert!(parse_grid("40x30").is_err());
+        // a product past usize is refused, not wrapped
+        assert!(parse_grid(&format!("{}x3", usize::MAX)).is_err());
     }
 }

@@ -6,7 +6,7 @@ use super::build::map_image_words;
 use super::orb_pass::{Look, OrbPass};
 use crate::features::fit::OpenCvFit;
 use crate::features::{
-    self, CoarseChoice, DecodeLimits, ExtractConfig, FeatureError, TileGrid, Tiles,
+    self, CoarseChoice, DecodeLimits, ExtractConfig, FeatureError, Frame, TileGrid, Tiles,
 };
 use crate::geometry::Keypoint;
 use crate::geometry::matches::QueryFeature;
@@ -461,12 +461,26 @@ impl Localizer {
         };
         let snapshot = self.map.snapshot();
         let map: &dyn MapRead = &*snapshot;
-        // the ORB pass looks first, when it may answer; if it fails, SIFT
+        // the ORB pass looks first, when it may answer, at the extraction
+        // frame SIFT goes on with if it does not (the frame's time is the
+        // pass's when it answers, else extraction's); if it fails, SIFT
         // answers as without it
-        let look = self
-            .orb_pass_for(options, tracing, &snapshot)
-            .and_then(|pass| match pass.look(&image, &self.extract) {
-                Ok(look) => Some(look),
+        let pass = self.orb_pass_for(options, tracing, &snapshot);
+        let framing = Instant::now();
+        let frame = match pass {
+            Some(_) => Some(Frame::new(&image, &self.extract)?),
+            None => None,
+        };
+        let framed = framing.elapsed();
+        let look = pass
+            .zip(frame.as_ref())
+            .and_then(|(pass, frame)| match pass.look(frame) {
+                Ok(mut look) => {
+                    if look.answer.is_some() {
+                        look.took += framed;
+                    }
+                    Some(look)
+                }
                 Err(e) => {
                     tracing::warn!("the ORB pass failed ({e}); the SIFT search answers");
                     None
@@ -486,13 +500,12 @@ impl Localizer {
             ));
         }
         let tiling = Instant::now();
-        let mut tiles = Tiles::new(
-            &image,
-            &self.extract,
-            grid,
-            Some((options.tile_order, options.seed)),
-        )?;
-        let mut extract = tiling.elapsed();
+        let order = Some((options.tile_order, options.seed));
+        let mut tiles = match frame {
+            Some(frame) => Tiles::of_frame(frame, grid, order)?,
+            None => Tiles::new(&image, &self.extract, grid, order)?,
+        };
+        let mut extract = framed + tiling.elapsed();
         let quantizer = self.vocab.quantizer(self.quantizer);
         let mut search = Search::new(map, &searched);
         let mut full = None;

@@ -7,7 +7,7 @@ use super::progress_bar;
 use crate::dataset::ImageRef;
 use crate::features::fit::OpenCvFit;
 use crate::features::orb::OrbDetector;
-use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Frame, GrayImage};
+use crate::features::{self, DecodeLimits, FeatureError, Frame};
 use crate::index::MapMeta;
 use crate::orb_pass::{
     Checked, FIT, OrbImage, OrbIndex, OrbPassParams, OrbSide, OrbSideMeta, Setting, answer,
@@ -20,15 +20,6 @@ use std::time::{Duration, Instant};
 
 /// Rounds of k-majority when the side's words are trained.
 const ITERATIONS: usize = 8;
-
-/// ORB of a decoded image in the extraction frame of `config`.
-pub fn orb_of(
-    image: &GrayImage,
-    config: &ExtractConfig,
-    detector: &mut OrbDetector,
-) -> Result<OrbImage, FeatureError> {
-    detector.detect(&mut Frame::new(image, config)?)
-}
 
 /// The ORB side of `localizer`'s map file, built from its images
 /// (`images`, in map order: each one's name must be the map image's) in the
@@ -73,7 +64,7 @@ pub fn build_orb_side(
                 let bytes = std::fs::read(&r.path)
                     .with_context(|| format!("{}: cannot read", r.path.display()))?;
                 let image = features::decode(&bytes, DecodeLimits::default(), config.max_side)?;
-                Ok(orb_of(&image, config, &mut OrbDetector::new(grid)?)?)
+                Ok(OrbDetector::new(grid)?.detect(&Frame::new(&image, config)?)?)
             };
             let orb = read().unwrap_or_else(|e| {
                 tracing::warn!("{e:#}: no ORB features for it");
@@ -157,12 +148,12 @@ impl OrbPass {
         }
     }
 
-    /// Look at a decoded query: ORB in the extraction frame of `config`, its
-    /// words voted over the map, the best-voted checked, and the setting's
-    /// answer if it answers.
-    pub fn look(&self, image: &GrayImage, config: &ExtractConfig) -> Result<Look, FeatureError> {
+    /// Look at a query in its extraction frame (the one SIFT goes on with
+    /// if the pass does not answer): ORB, its words voted over the map, the
+    /// best-voted checked, and the setting's answer if it answers.
+    pub fn look(&self, frame: &Frame) -> Result<Look, FeatureError> {
         let started = Instant::now();
-        let query = orb_of(image, config, &mut OrbDetector::new(self.meta.grid)?)?;
+        let query = OrbDetector::new(self.meta.grid)?.detect(frame)?;
         let words = self.vocabulary.words_of(&query.descriptors);
         let checked = self.index.check(&query, &words, self.top, &self.fit);
         Ok(Look {
