@@ -13,6 +13,8 @@
 # gardens-point and checked on rtabmap-loop, the other way round, and
 # chosen on the even queries of both datasets and checked on the odd ones;
 # and it counts the settings within the bar on both datasets at once.
+# With the reversed sets (below), it also chooses on both datasets at once
+# and checks on both reversed sets.
 #
 #   scripts/orb-pass.sh [SEEDS]      (default "1 2 3")
 #
@@ -119,6 +121,9 @@ for loss in $losses; do
   fi
   choose "rtabmap-loop/all" "gardens-point/all"
   choose "gardens-point/even rtabmap-loop/even" "gardens-point/odd rtabmap-loop/odd"
+  if [ -n "$reversed" ]; then
+    choose "gardens-point/all rtabmap-loop/all" "gardens-point-reversed/all rtabmap-loop-reversed/all"
+  fi
 done
 # the bar on both datasets at once (all queries, every seed)
 echo "settings within the bar on both datasets, every seed (all queries):"

@@ -59,17 +59,48 @@ fn files(dir: &std::path::Path) -> (PathBuf, PathBuf) {
     (v, m)
 }
 
-async fn localize(state: &Arc<AppState>, query: &str, image: Vec<u8>) -> serde_json::Value {
+/// `/localize?{query}` of `image`: the status and the JSON body.
+async fn post(
+    state: &Arc<AppState>,
+    query: &str,
+    image: Vec<u8>,
+) -> (StatusCode, serde_json::Value) {
     let request = Request::post(format!("/localize?{query}"))
         .header(header::CONTENT_TYPE, "image/jpeg")
         .body(Body::from(image))
         .unwrap();
     let response = router(state.clone()).oneshot(request).await.unwrap();
-    assert_eq!(response.status(), StatusCode::OK);
+    let status = response.status();
     let bytes = axum::body::to_bytes(response.into_body(), 1 << 24)
         .await
         .unwrap();
-    serde_json::from_slice(&bytes).unwrap()
+    (status, serde_json::from_slice(&bytes).unwrap())
+}
+
+async fn localize(state: &Arc<AppState>, query: &str, image: Vec<u8>) -> serde_json::Value {
+    let (status, answer) = post(state, query, image).await;
+    assert_eq!(status, StatusCode::OK, "{answer}");
+    answer
+}
+
+/// Images that are not good queries: the test fixtures (one pixel, uniform,
+/// 16-bit, CMYK, RGBA, animated), a real query cut in half, a real query's
+/// first kilobyte, no bytes, and bytes that are no image.
+fn bad_inputs(query: &[u8]) -> Vec<(String, Vec<u8>)> {
+    let fixtures = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+    let mut inputs: Vec<(String, Vec<u8>)> = std::fs::read_dir(&fixtures)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e != "py"))
+        .map(|p| (p.display().to_string(), std::fs::read(&p).unwrap()))
+        .collect();
+    inputs.sort();
+    assert!(inputs.len() >= 5, "{inputs:?}");
+    inputs.push(("half a query".into(), query[..query.len() / 2].to_vec()));
+    inputs.push(("a query's first kilobyte".into(), query[..1024].to_vec()));
+    inputs.push(("no bytes".into(), Vec::new()));
+    inputs.push(("not an image".into(), b"GIF89a but not really".repeat(40)));
+    inputs
 }
 
 #[tokio::test]
@@ -142,6 +173,22 @@ async fn the_pass_answers_easy_queries_without_sift_and_leaves_the_rest() {
         .unwrap();
     let response = router(state.clone()).oneshot(request).await.unwrap();
     assert_eq!(response.status(), StatusCode::BAD_REQUEST);
+
+    // bad input with the pass on is answered as without it: the same
+    // status, never a 500; an image ORB finds nothing in is left to SIFT
+    for (name, bytes) in bad_inputs(&image) {
+        let (with, a) = post(&state, "orb_pass=true", bytes.clone()).await;
+        let (without, b) = post(&state, "orb_pass=false", bytes).await;
+        assert_eq!(with, without, "{name}: {a} / {b}");
+        assert!(!with.is_server_error(), "{name}: {a}");
+        if with == StatusCode::OK && a["features"]["total"] == 0 {
+            assert_eq!(a["orb_pass"]["answered"], false, "{name}: {a}");
+            assert_ne!(a["stop"]["kind"], "orb-pass", "{name}: {a}");
+        }
+        if with != StatusCode::OK {
+            assert_eq!(a, b, "{name}: the same error");
+        }
+    }
 
     // off by configuration, a request may still ask for it
     let mut off = config.clone();

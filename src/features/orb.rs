@@ -10,6 +10,10 @@ use opencv::core::{KeyPoint, Mat, Ptr, Vector, no_array};
 use opencv::features2d::{ORB, ORB_ScoreType};
 use opencv::prelude::*;
 
+/// Pixels along the border where ORB finds no keypoints (its edge
+/// threshold, and the patch its descriptor reads).
+const EDGE: i32 = 31;
+
 /// An ORB detector, and the cells its keypoints are spread over (`None`:
 /// ORB's own strongest corners, wherever they are).
 pub struct OrbDetector {
@@ -34,7 +38,7 @@ impl OrbDetector {
             features as i32,
             1.2,
             8,
-            31,
+            EDGE,
             0,
             2,
             ORB_ScoreType::HARRIS_SCORE,
@@ -47,6 +51,11 @@ impl OrbDetector {
     /// ORB of the extraction frame.
     pub fn detect(&mut self, frame: &Frame) -> Result<OrbImage, FeatureError> {
         let mat = frame.pixels();
+        // no keypoint lies within EDGE pixels of the border, and OpenCV's
+        // ORB fails on a frame too small to scale down (one pixel)
+        if mat.cols().min(mat.rows()) <= 2 * EDGE {
+            return Ok(OrbImage::default());
+        }
         let (mut keys, mut raw) = (Vector::<KeyPoint>::new(), Mat::default());
         match self.grid {
             None => self
@@ -115,21 +124,54 @@ mod tests {
         assert!(OrbDetector::new(Some((0, 3))).is_err());
     }
 
-    #[test]
-    fn a_blank_frame_has_no_keypoints() {
+    /// The frame of a `w`×`h` image, uniform grey or noise.
+    fn frame_of(w: i32, h: i32, noise: bool) -> Frame {
         let config = ExtractConfig::default();
-        let flat = Mat::new_rows_cols_with_default(
-            48,
-            64,
+        let mut m = Mat::new_rows_cols_with_default(
+            h,
+            w,
             opencv::core::CV_8UC1,
             opencv::core::Scalar::all(128.0),
         )
         .unwrap();
+        if noise {
+            let (lo, hi) = (
+                Mat::from_slice(&[0.0]).unwrap(),
+                Mat::from_slice(&[255.0]).unwrap(),
+            );
+            opencv::core::randu(&mut m, &lo, &hi).unwrap();
+        }
         let mut png = Vector::<u8>::new();
-        opencv::imgcodecs::imencode(".png", &flat, &mut png, &Vector::new()).unwrap();
+        opencv::imgcodecs::imencode(".png", &m, &mut png, &Vector::new()).unwrap();
         let image = decode(png.as_slice(), DecodeLimits::default(), config.max_side).unwrap();
-        let frame = Frame::new(&image, &config).unwrap();
-        let orb = OrbDetector::new(None).unwrap().detect(&frame).unwrap();
+        Frame::new(&image, &config).unwrap()
+    }
+
+    #[test]
+    fn a_blank_frame_has_no_keypoints() {
+        let orb = OrbDetector::new(None)
+            .unwrap()
+            .detect(&frame_of(64, 48, false))
+            .unwrap();
         assert_eq!(orb, OrbImage::default());
+    }
+
+    #[test]
+    fn a_frame_too_small_for_orb_has_no_keypoints_not_an_error() {
+        for (w, h) in [(1, 1), (8, 8), (200, 62), (62, 200)] {
+            for grid in [None, Some((4, 3))] {
+                let orb = OrbDetector::new(grid)
+                    .unwrap()
+                    .detect(&frame_of(w, h, true))
+                    .unwrap();
+                assert_eq!(orb, OrbImage::default(), "{w}x{h} {grid:?}");
+            }
+        }
+        // just past the border's width, noise has corners
+        let orb = OrbDetector::new(None)
+            .unwrap()
+            .detect(&frame_of(96, 96, true))
+            .unwrap();
+        assert!(!orb.centres.is_empty());
     }
 }
