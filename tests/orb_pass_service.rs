@@ -3,7 +3,8 @@
 //! map, the service loads it at start-up (`[orb_pass] enabled`), and
 //! `/localize` answers easy queries from it without SIFT (stop kind
 //! `orb-pass`), mostly right, and leaves the others, the full search and
-//! `orb_pass=false` to SIFT. A side built for another map is refused.
+//! `orb_pass=false` to SIFT; bad input gets the answer or the error it
+//! gets without the pass. A side built for another map is refused.
 
 mod common;
 
