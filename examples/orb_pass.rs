@@ -24,8 +24,11 @@
 //! other on this thread, three timings from the same bytes: the full search
 //! on the whole image (`rule=none`, no tiles: what streaming and stopping
 //! save against), the service's default, and the pass. A query the pass
-//! answers costs its decode and the pass; any other costs the pass (its
-//! decode left out: the service would decode once) and the default. It
+//! answers costs its decode and the pass (with the extraction frame it
+//! looks at); any other costs the pass (its decode left out: the service
+//! would decode once) and the default, which makes the frame again where
+//! the service hands the pass's frame on to SIFT (a downscale counted
+//! twice: the figures lean against the pass). It
 //! prints, for a few settings, the queries the pass answered, recall@1 and
 //! recall@5 against the full search's, the median of the per-query ratios
 //! of the request time to the full search's, with the default alone beside
