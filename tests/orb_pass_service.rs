@@ -150,6 +150,17 @@ async fn the_pass_answers_easy_queries_without_sift_and_leaves_the_rest() {
             assert_ne!(a["stop"]["kind"], "orb-pass");
             // SIFT answered (some of these images have no features at all)
             assert!(a["tiles"]["extracted"].as_u64().unwrap() > 0, "{a}");
+            // on the frame the pass looked at, as it answers without the
+            // pass (the plan fixed: the learned one is drawn per request)
+            let fixed = "seed=1&tiles=2x2+24";
+            let bytes = std::fs::read(&r.path).unwrap();
+            let with = localize(&state, &format!("{fixed}&orb_pass=true"), bytes.clone()).await;
+            let without = localize(&state, &format!("{fixed}&orb_pass=false"), bytes).await;
+            assert_eq!(with["orb_pass"]["answered"], false, "query {q}: {with}");
+            for key in ["candidates", "features", "stop"] {
+                assert_eq!(with[key], without[key], "query {q}: {key}");
+            }
+            assert_eq!(with["tiles"]["extracted"], without["tiles"]["extracted"]);
         }
     }
     let n = data.queries.len();
