@@ -3,8 +3,7 @@
 //! ORB's own strongest corners or corners spread over a grid of cells.
 
 use super::{FeatureError, Frame};
-pub use crate::orb_pass::ORB_FEATURES;
-use crate::orb_pass::OrbImage;
+use crate::orb_pass::{ORB_FEATURES, OrbImage};
 use crate::vocabulary::binary::from_rows;
 use opencv::core::{KeyPoint, Mat, Ptr, Vector, no_array};
 use opencv::features2d::{ORB, ORB_ScoreType};

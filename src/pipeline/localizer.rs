@@ -461,20 +461,15 @@ impl Localizer {
         };
         let snapshot = self.map.snapshot();
         let map: &dyn MapRead = &*snapshot;
-        // the ORB pass looks first, when it may answer, at the extraction
-        // frame SIFT goes on with if it does not (the frame's time is the
-        // pass's when it answers, else extraction's); if it fails, SIFT
-        // answers as without it
-        let pass = self.orb_pass_for(options, tracing, &snapshot);
+        // the extraction frame, which the ORB pass looks at first when it
+        // may answer (the frame's time is the pass's when it answers, else
+        // extraction's); if it fails, SIFT answers as without it
         let framing = Instant::now();
-        let frame = match pass {
-            Some(_) => Some(Frame::new(&image, &self.extract)?),
-            None => None,
-        };
+        let frame = Frame::new(&image, &self.extract)?;
         let framed = framing.elapsed();
-        let look = pass
-            .zip(frame.as_ref())
-            .and_then(|(pass, frame)| match pass.look(frame) {
+        let look = self
+            .orb_pass_for(options, tracing, &snapshot)
+            .and_then(|pass| match pass.look(&frame) {
                 Ok(mut look) => {
                     if look.answer.is_some() {
                         look.took += framed;
@@ -500,11 +495,7 @@ impl Localizer {
             ));
         }
         let tiling = Instant::now();
-        let order = Some((options.tile_order, options.seed));
-        let mut tiles = match frame {
-            Some(frame) => Tiles::of_frame(frame, grid, order)?,
-            None => Tiles::new(&image, &self.extract, grid, order)?,
-        };
+        let mut tiles = Tiles::of_frame(frame, grid, Some((options.tile_order, options.seed)))?;
         let mut extract = framed + tiling.elapsed();
         let quantizer = self.vocab.quantizer(self.quantizer);
         let mut search = Search::new(map, &searched);
