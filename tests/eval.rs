@@ -34,21 +34,30 @@ fn eval(out: &Path, cache: &Path, extra: &[&str]) -> String {
 fn bad_set_histogram_and_plan_order_values_fail_before_any_extraction() {
     let dir = tempfile::tempdir().unwrap();
     let (out, cache) = (dir.path().join("out"), dir.path().join("cache"));
-    for (args, says) in [
-        (["--set", "relative=2.5x"], "--set relative=2.5x"),
-        (["--set", "nope=1"], "unknown rule `nope`"),
+    let cases: [(&[&str], &str); 7] = [
+        (&["--set", "relative=2.5x"], "--set relative=2.5x"),
+        (&["--set", "nope=1"], "unknown rule `nope`"),
         (
-            ["--histogram", "peak-mean=abc"],
+            &["--histogram", "peak-mean=abc"],
             "--histogram peak-mean=abc",
         ),
-        (["--histogram", "nope"], "rule `nope` is not in the sweep"),
+        (&["--histogram", "nope"], "rule `nope` is not in the sweep"),
         (
-            ["--plan-orders", "2"],
+            &["--plan-orders", "2"],
             "--plan-orders replays a learned coarse pass",
         ),
-    ] {
+        (
+            &["--orb-pass", "--orb-floor", "2"],
+            "--orb-pass: floor must be at least 3",
+        ),
+        (
+            &["--orb-pass", "--orb-grid", "0x3"],
+            "--orb-pass: grid `0x3`: want COLSxROWS",
+        ),
+    ];
+    for (args, says) in cases {
         let started = std::time::Instant::now();
-        let o = run_eval(&out, &cache, &args);
+        let o = run_eval(&out, &cache, args);
         let stderr = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success(), "{args:?} accepted");
         assert!(stderr.contains(says), "{args:?}: {stderr}");
@@ -356,6 +365,69 @@ fn eval_writes_consistent_tables_plots_and_reuses_its_cache() {
         }
     }
     assert!(md.contains("## The learned plan over query orders"), "{md}");
+
+    // The ORB pass first: the map's ORB side built beside the cached map
+    // on the first run and reused on the next; the full search and the
+    // setting asked for (verified) again with the pass first, which answers
+    // some queries with no SIFT feature and so uses fewer features and less
+    // time than the setting alone.
+    let orb_args = [
+        "--runs",
+        "1",
+        "--rules",
+        "none",
+        "--verify",
+        "--set",
+        "place-z=2.25+verified=12@20",
+        "--orb-pass",
+        "--no-plots",
+    ];
+    let out4 = dir.path().join("out4");
+    let log = eval(&out4, &cache, &orb_args);
+    assert!(!log.contains("ORB side from cache"), "{log}");
+    let log = eval(&out4, &cache, &orb_args);
+    assert!(log.contains("ORB side from cache"), "{log}");
+    let orb: Value =
+        serde_json::from_slice(&std::fs::read(out4.join("results.json")).unwrap()).unwrap();
+    let pass = &orb["orb_pass"];
+    let looks = pass["looks"].as_array().unwrap();
+    assert_eq!(looks.len(), 2, "one per vocabulary seed");
+    let settings = orb["settings"].as_array().unwrap();
+    for (seed, l) in looks.iter().enumerate() {
+        let l = l.as_array().unwrap();
+        assert_eq!(l.len(), 44);
+        let answered = l.iter().filter(|q| !q["answer"].is_null()).count();
+        let share = pass["answered"]["per_seed"][seed].as_f64().unwrap();
+        assert!((share - answered as f64 / 44.0).abs() < 1e-9, "{share}");
+        assert!(answered > 0 && answered < 44, "{answered}");
+        for q in l {
+            assert!(q["pass_ms"].as_f64().unwrap() > 0.0, "{q}");
+        }
+    }
+    let rows = pass["rows"].as_array().unwrap();
+    let alone: Vec<&str> = rows
+        .iter()
+        .map(|r| {
+            settings[r["alone"].as_u64().unwrap() as usize]["label"]
+                .as_str()
+                .unwrap()
+        })
+        .collect();
+    assert_eq!(
+        alone,
+        ["none +verify", "place-z 2.25 or verified 12 w=20 +verify"]
+    );
+    for (r, label) in rows.iter().zip(&alone) {
+        let with = &r["with"];
+        assert_eq!(with["label"], format!("{label} +orb"));
+        let before = &settings[r["alone"].as_u64().unwrap() as usize];
+        assert!(mean(&with["fraction"]) < mean(&before["fraction"]), "{r}");
+        let median = |s: &Value| s["time_share_whole"]["median"].as_f64().unwrap();
+        assert!(median(with) < median(before), "{r}");
+    }
+    let md = std::fs::read_to_string(out4.join("results.md")).unwrap();
+    assert!(md.contains("## The ORB pass first"), "{md}");
+    assert!(md.contains("| none +verify +orb |"), "{md}");
 }
 
 #[test]

@@ -6,6 +6,7 @@ use bowloc::calibrate::Warmup;
 use bowloc::eval::machine::OpenCvInfo;
 use bowloc::eval::{self, DEFAULT_TARGETS, EvalConfig};
 use bowloc::features::TilePlan;
+use bowloc::orb_pass::OrbPassParams;
 use bowloc::search::SearchOptions;
 use clap::Args;
 use std::path::PathBuf;
@@ -118,6 +119,63 @@ pub struct EvalArgs {
     injections: usize,
     #[command(flatten)]
     model: SequenceArgs,
+    #[command(flatten)]
+    orb: OrbPassEvalArgs,
+}
+
+/// `--orb-pass` and its setting (the service's `[orb_pass]` defaults).
+#[derive(Debug, clap::Args)]
+struct OrbPassEvalArgs {
+    /// Also run the full search and the --set settings (verified, with
+    /// --verify) with the service's ORB pass first, on every vocabulary
+    /// (the map's ORB side is built beside the cached map).
+    #[arg(long)]
+    orb_pass: bool,
+    /// With --orb-pass: best-voted map images the pass checks.
+    #[arg(long, default_value_t = OrbPassParams::default().top)]
+    orb_top: usize,
+    /// With --orb-pass: inliers its pick needs.
+    #[arg(long, default_value_t = OrbPassParams::default().floor)]
+    orb_floor: usize,
+    /// With --orb-pass: how far its pick's scale may be from the query's
+    /// (|ln s| at most this).
+    #[arg(long, default_value_t = OrbPassParams::default().window)]
+    orb_window: f64,
+    /// With --orb-pass: the share of the most inliers a candidate needs to
+    /// be picked by its scale.
+    #[arg(long, default_value_t = OrbPassParams::default().share)]
+    orb_share: f64,
+    /// With --orb-pass: whether its pick must see the votes' first place.
+    #[arg(long, default_value_t = OrbPassParams::default().agree, action = clap::ArgAction::Set)]
+    orb_agree: bool,
+    /// With --orb-pass: binary words of the ORB side's vocabulary.
+    #[arg(long, default_value_t = OrbPassParams::default().words)]
+    orb_words: usize,
+    /// With --orb-pass: `none` (ORB's strongest corners) or COLSxROWS.
+    #[arg(long, default_value_t = OrbPassParams::default().grid)]
+    orb_grid: String,
+}
+
+impl OrbPassEvalArgs {
+    fn params(&self) -> anyhow::Result<Option<OrbPassParams>> {
+        if !self.orb_pass {
+            return Ok(None);
+        }
+        let params = OrbPassParams {
+            top: self.orb_top,
+            floor: self.orb_floor,
+            window: self.orb_window,
+            share: self.orb_share,
+            agree: self.orb_agree,
+            words: self.orb_words,
+            grid: self.orb_grid.clone(),
+            ..OrbPassParams::default()
+        };
+        params
+            .validate()
+            .map_err(|e| anyhow::anyhow!("--orb-pass: {e}"))?;
+        Ok(Some(params))
+    }
 }
 
 pub fn run(a: EvalArgs) -> anyhow::Result<()> {
@@ -145,6 +203,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         tile_order: a.tile_order,
         feature_order: a.feature_order,
         plan_orders: a.plan_orders,
+        orb_pass: a.orb.params()?,
         vocab: a.vocab,
         out: a
             .out

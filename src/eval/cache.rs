@@ -611,11 +611,7 @@ pub fn map_index(
     map: &DescriptorSet,
     name: &str,
 ) -> anyhow::Result<MapIndex> {
-    let path = dir.join(format!(
-        "map-{}-{:016x}.bowmap",
-        vocab.hash_hex(),
-        map.hash()
-    ));
+    let path = map_path(dir, vocab, map);
     if path.exists() {
         match MapIndex::open_for(&path, vocab, true) {
             Ok(m) if m.images() == map.len() => {
@@ -630,6 +626,49 @@ pub fn map_index(
     let index = index_descriptors(vocab, &names, &map.owned_per_image(), None, name);
     index.save(&path)?;
     Ok(index)
+}
+
+/// Where the map of `vocab` over the descriptors `map` is cached.
+fn map_path(dir: &Path, vocab: &Vocabulary, map: &DescriptorSet) -> PathBuf {
+    dir.join(format!(
+        "map-{}-{:016x}.bowmap",
+        vocab.hash_hex(),
+        map.hash()
+    ))
+}
+
+/// The ORB side of the cached map `index` (of `vocab` over `map`), for the
+/// ORB pass with `params`: kept beside the map, built from the map images
+/// (`images`, extracted with `extract`) when missing or built otherwise.
+pub fn orb_side(
+    dir: &Path,
+    vocab: &Vocabulary,
+    map: &DescriptorSet,
+    index: &MapIndex,
+    images: &[ImageRef],
+    extract: &ExtractConfig,
+    params: &crate::orb_pass::OrbPassParams,
+) -> anyhow::Result<crate::orb_pass::OrbSide> {
+    use crate::orb_pass::{OrbSide, OrbSideMeta, file::path_beside};
+    let path = path_beside(&map_path(dir, vocab, map));
+    let grid = params.grid().map_err(anyhow::Error::msg)?;
+    let seed = vocab.meta().seed;
+    let wanted = OrbSideMeta::for_map(index.meta(), params.words, seed, grid);
+    if path.exists() {
+        match OrbSide::open(&path) {
+            Ok(side) if side.meta == wanted => {
+                tracing::info!(path = %path.display(), "ORB side from cache");
+                return Ok(side);
+            }
+            Ok(_) => {
+                tracing::warn!(path = %path.display(), "cached ORB side does not fit: rebuilding")
+            }
+            Err(e) => tracing::warn!("unusable cached ORB side, rebuilding: {e:#}"),
+        }
+    }
+    let side = crate::pipeline::orb_side_of(index, extract, seed, images, params.words, grid)?;
+    side.save(&path)?;
+    Ok(side)
 }
 
 #[cfg(test)]

@@ -18,7 +18,9 @@
 //! 5. [`verify`] (when asked): the full search and the explicit settings
 //!    re-ranked by geometric verification, with and without side by side
 //!    (on the first vocabulary);
-//! 6. [`table`] and [`plots`]: the outputs, with every query's answers in
+//! 6. [`orb_pass`] (when asked): the full search and the settings asked
+//!    for again with the service's ORB pass first, on every vocabulary;
+//! 7. [`table`] and [`plots`]: the outputs, with every query's answers in
 //!    `results.json` for re-scoring.
 //!
 //! [`sequence`] is the other evaluation (`bowloc eval --sequence`): the
@@ -30,6 +32,7 @@ pub mod cache;
 pub mod equal_recall;
 pub mod machine;
 pub mod metrics;
+pub mod orb_pass;
 pub mod plan_orders;
 pub mod plots;
 pub mod recommend;
@@ -128,6 +131,9 @@ pub struct EvalConfig {
     /// With a learned coarse pass: fresh plans replayed over this many
     /// random query orders for every setting asked for ([`plan_orders`]).
     pub plan_orders: u32,
+    /// Also run the full search and the settings asked for with the ORB
+    /// pass first, with this setting of it ([`orb_pass`]).
+    pub orb_pass: Option<crate::orb_pass::OrbPassParams>,
 }
 
 /// The dataset as evaluated.
@@ -249,6 +255,9 @@ pub struct Report {
     pub per_query: PerQuery,
     /// The verification pass, when asked for.
     pub verification: Option<verify::VerificationReport>,
+    /// The settings again with the ORB pass first, when asked for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orb_pass: Option<orb_pass::OrbPassReport>,
     /// Fresh learned plans over random query orders, when asked for.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub plan_orders: Vec<plan_orders::PlanOrders>,
@@ -841,6 +850,79 @@ fn summarize_settings(
     (summaries, whole_image)
 }
 
+/// Stage 6 ([`orb_pass`]): each vocabulary's pass (its map's ORB side
+/// cached beside the map) looks at every query; the full search and each
+/// setting asked for (re-ranked by verification, when verification is on)
+/// summarized again with the pass first.
+#[allow(clippy::too_many_arguments)]
+fn replay_orb_pass(
+    config: &EvalConfig,
+    params: &crate::orb_pass::OrbPassParams,
+    dataset: &Dataset,
+    extract: &ExtractConfig,
+    vocabs: &[Vocabulary],
+    map_desc: &cache::DescriptorSet,
+    maps: &[MapIndex],
+    words: &Words,
+    plan: &SweepPlan,
+    swept: &Swept,
+) -> anyhow::Result<orb_pass::OrbPassReport> {
+    let passes = vocabs
+        .iter()
+        .zip(maps)
+        .map(|(v, m)| {
+            let side =
+                cache::orb_side(&config.cache, v, map_desc, m, &dataset.map, extract, params)?;
+            Ok(crate::pipeline::OrbPass::new(side, params))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let looks = orb_pass::look_all(&dataset.queries, extract, &passes, config.place_window);
+    let verified = |i: usize| {
+        plan.verified_pairs
+            .iter()
+            .find(|p| p.0 == i)
+            .map_or(i, |p| p.1)
+    };
+    let mut alone: Vec<usize> = vec![verified(0)];
+    for &i in &plan.explicit {
+        if !alone.contains(&verified(i)) {
+            alone.push(verified(i));
+        }
+    }
+    let tiles_total: Vec<usize> = words.plain[0]
+        .queries
+        .iter()
+        .map(|q| (q.tiles.len() - usize::from(q.coarse_first)).max(1))
+        .collect();
+    let rows = alone
+        .into_iter()
+        .map(|i| {
+            let runs: Vec<Vec<Vec<Outcome>>> = swept
+                .outcomes
+                .iter()
+                .zip(&looks)
+                .zip(&words.plain)
+                .map(|((o, l), q)| orb_pass::first(&o[i], l, &q.costs))
+                .collect();
+            let seeds = by_seed(runs.iter(), &words.plain, swept);
+            let setting = &plan.settings[i];
+            let mut with = summary::summarize(setting, &seeds, &dataset.truth, &tiles_total);
+            with.label = format!("{} +orb", with.label);
+            orb_pass::OrbPassRow {
+                alone: i,
+                full: if setting.verify { verified(0) } else { 0 },
+                with,
+            }
+        })
+        .collect();
+    Ok(orb_pass::OrbPassReport::new(
+        params.clone(),
+        looks,
+        &dataset.truth,
+        rows,
+    ))
+}
+
 /// The histogram of the fractions of features used under setting `index`,
 /// over every seed, run and query.
 fn histogram_of(outcomes: &SeedSettingRuns, index: usize, label: &str) -> HistogramInfo {
@@ -1003,6 +1085,14 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
                 .collect(),
         });
     stages.verify_s = seconds_since(&mut clock);
+
+    // 6. the ORB pass first (every vocabulary)
+    let orb_pass = match &config.orb_pass {
+        None => None,
+        Some(params) => Some(replay_orb_pass(
+            config, params, &dataset, &extract, &vocabs, &map_desc, &maps, &words, &plan, &swept,
+        )?),
+    };
     stages.total_s = started.elapsed().as_secs_f64();
 
     // 6. the report and its outputs
@@ -1045,6 +1135,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         histogram,
         whole_image,
         verification,
+        orb_pass,
         plan_orders,
         per_query: PerQuery {
             queries: dataset.queries.iter().map(|q| q.name.clone()).collect(),

@@ -296,6 +296,9 @@ pub fn markdown(report: &Report) -> String {
     if let Some(v) = &report.verification {
         let _ = writeln!(s, "{}", super::verify::markdown(v));
     }
+    if let Some(o) = &report.orb_pass {
+        s += &super::orb_pass::markdown(o, &report.settings);
+    }
     s.push_str(&super::plan_orders::markdown(&report.plan_orders));
     s
 }

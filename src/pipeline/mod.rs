@@ -19,7 +19,7 @@ pub use extract::{
     extract_tiled, stack,
 };
 pub use localizer::{Localizer, Plan, TRACE_POINTS, Tracing};
-pub use orb_pass::{OrbPass, build_orb_side};
+pub use orb_pass::{OrbPass, build_orb_side, orb_side_of};
 
 use indicatif::{ProgressBar, ProgressStyle};
 

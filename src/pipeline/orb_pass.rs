@@ -7,8 +7,8 @@ use super::progress_bar;
 use crate::dataset::ImageRef;
 use crate::features::fit::OpenCvFit;
 use crate::features::orb::OrbDetector;
-use crate::features::{self, DecodeLimits, FeatureError, Frame};
-use crate::index::MapMeta;
+use crate::features::{self, DecodeLimits, ExtractConfig, FeatureError, Frame};
+use crate::index::{MapIndex, MapMeta};
 use crate::orb_pass::{
     Checked, FIT, OrbImage, OrbIndex, OrbPassParams, OrbSide, OrbSideMeta, Setting, answer,
 };
@@ -33,9 +33,28 @@ pub fn build_orb_side(
     grid: Option<(usize, usize)>,
 ) -> anyhow::Result<OrbSide> {
     let snapshot = localizer.map.snapshot();
-    let base = snapshot.base();
+    let seed = localizer.vocab.meta().seed;
+    orb_side_of(
+        snapshot.base(),
+        &localizer.extract,
+        seed,
+        images,
+        words,
+        grid,
+    )
+}
+
+/// [`build_orb_side`] for the map `base`, whose images were extracted with
+/// `config`, and the vocabulary seed `seed`.
+pub fn orb_side_of(
+    base: &MapIndex,
+    config: &ExtractConfig,
+    seed: u64,
+    images: &[ImageRef],
+    words: usize,
+    grid: Option<(usize, usize)>,
+) -> anyhow::Result<OrbSide> {
     let map = base.meta();
-    let (config, seed) = (&localizer.extract, localizer.vocab.meta().seed);
     if images.len() != map.images {
         bail!(
             "{} images given for a map of {} images: give the list the map was built from",
