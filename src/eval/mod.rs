@@ -876,7 +876,24 @@ fn replay_orb_pass(
             Ok(crate::pipeline::OrbPass::new(side, params))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let looks = orb_pass::look_all(&dataset.queries, extract, &passes, config.place_window);
+    // each look priced against the query's whole-image SIFT as the cache
+    // timed it
+    let whole = words.whole.as_ref().unwrap_or(&words.plain);
+    let cached_sift: Vec<f32> = whole[0]
+        .queries
+        .iter()
+        .map(|q| q.tiles.iter().map(|t| t.ms).sum())
+        .collect();
+    let looks: Vec<Vec<orb_pass::Look>> =
+        orb_pass::look_all(&dataset.queries, extract, &passes, config.place_window)
+            .into_iter()
+            .map(|seed| {
+                seed.iter()
+                    .zip(&cached_sift)
+                    .map(|(l, &ms)| l.priced(ms))
+                    .collect()
+            })
+            .collect();
     let verified = |i: usize| {
         plan.verified_pairs
             .iter()

@@ -7,15 +7,16 @@
 //! SIFT feature; any other costs the pass on top of the setting's own
 //! outcome (its frame is the one SIFT goes on with, so it stays
 //! extraction's). Times are the thread's CPU time, the cheapest of
-//! [`ROUNDS`], as the cache times extraction.
+//! [`ROUNDS`], as the cache times extraction, and priced against SIFT over
+//! the whole image timed beside them ([`Look::priced`]).
 
 use super::summary::{QueryCost, SettingSummary, Stat};
 use super::sweep::Outcome;
 use super::timing::{self, Quantiles};
 use crate::dataset::ImageRef;
-use crate::features::{self, DecodeLimits, ExtractConfig, Frame};
+use crate::features::{self, DecodeLimits, ExtractConfig, Frame, TileGrid};
 use crate::orb_pass::{Checked, OrbPassParams};
-use crate::pipeline::{OrbPass, progress_bar};
+use crate::pipeline::{OrbPass, extract_interleaved, progress_bar};
 use crate::search::{Ranked, StopKind};
 use cpu_time::ThreadTime;
 use rayon::prelude::*;
@@ -38,6 +39,8 @@ pub struct Look {
     /// The pass itself (ORB, its words, the votes and the checks), in
     /// milliseconds.
     pub pass_ms: f32,
+    /// SIFT over the whole frame, timed beside the look, in milliseconds.
+    pub sift_ms: f32,
 }
 
 fn ids<S: serde::Serializer>(answer: &Option<Vec<Ranked>>, s: S) -> Result<S::Ok, S::Error> {
@@ -110,10 +113,13 @@ impl Look {
         answer: None,
         frame_ms: 0.0,
         pass_ms: 0.0,
+        sift_ms: 0.0,
     };
 }
 
-/// One query decoded once and looked at by every pass.
+/// One query decoded once and looked at by every pass, [`ROUNDS`] times,
+/// each round also extracting SIFT over the whole image (its time is what
+/// [`Look::priced`] scales the pass's by).
 fn look_one(
     query: &ImageRef,
     extract: &ExtractConfig,
@@ -121,29 +127,57 @@ fn look_one(
     place_window: u32,
 ) -> anyhow::Result<Vec<Look>> {
     let image = features::decode_file(&query.path, DecodeLimits::default(), extract.max_side)?;
-    let mut looks = Vec::with_capacity(passes.len());
-    for pass in passes {
-        let (mut frame_took, mut pass_took) = (Duration::MAX, Duration::MAX);
-        let mut answer = None;
-        for _ in 0..ROUNDS {
+    let mut sift = Duration::MAX;
+    let mut kept: Vec<(Duration, Duration, Option<Vec<Ranked>>)> =
+        vec![(Duration::MAX, Duration::MAX, None); passes.len()];
+    for _ in 0..ROUNDS {
+        let whole = extract_interleaved(&image, extract, &[TileGrid::WHOLE], 1)?;
+        sift = sift.min(whole.first().map_or(Duration::ZERO, |w| w.extract));
+        for (pass, (frame_took, pass_took, answer)) in passes.iter().zip(&mut kept) {
             let started = ThreadTime::now();
             let frame = Frame::new(&image, extract)?;
             let framed = started.elapsed();
             let looked = ThreadTime::now();
             let look = pass.look(&frame)?;
-            pass_took = pass_took.min(looked.elapsed());
-            frame_took = frame_took.min(framed);
-            answer = look
+            *pass_took = (*pass_took).min(looked.elapsed());
+            *frame_took = (*frame_took).min(framed);
+            *answer = look
                 .answer
                 .map(|ids| ranked(&ids, &look.checked, place_window));
         }
-        looks.push(Look {
-            answer,
-            frame_ms: (frame_took.as_secs_f64() * 1e3) as f32,
-            pass_ms: (pass_took.as_secs_f64() * 1e3) as f32,
-        });
     }
-    Ok(looks)
+    let ms = |d: Duration| (d.as_secs_f64() * 1e3) as f32;
+    Ok(kept
+        .into_iter()
+        .map(|(frame, pass, answer)| Look {
+            answer,
+            frame_ms: ms(frame),
+            pass_ms: ms(pass),
+            sift_ms: ms(sift),
+        })
+        .collect())
+}
+
+impl Look {
+    /// The look with its times in the units of the cache's (`cached_sift_ms`:
+    /// the query's SIFT over the whole image as the cache timed it): each
+    /// scaled by that over the SIFT timed beside the look. The cache's
+    /// times were taken in another sitting, and this machine's speed moves
+    /// between sittings; so priced, the pass costs what it costs beside
+    /// SIFT, not what the sitting it ran in made it cost.
+    pub fn priced(&self, cached_sift_ms: f32) -> Look {
+        let k = if self.sift_ms > 0.0 && cached_sift_ms > 0.0 {
+            cached_sift_ms / self.sift_ms
+        } else {
+            1.0
+        };
+        Look {
+            answer: self.answer.clone(),
+            frame_ms: self.frame_ms * k,
+            pass_ms: self.pass_ms * k,
+            sift_ms: cached_sift_ms,
+        }
+    }
 }
 
 /// A setting's outcomes `runs[run][query]` with the pass first (`looks`
@@ -282,7 +316,8 @@ pub fn markdown(report: &OrbPassReport, settings: &[SettingSummary]) -> String {
          keypoints `{}`) looked at every query before each setting: it answered {} % of \
          the queries (per vocabulary seed {}), {} % of them right (per seed {}), in a \
          median {:.2} ms (p95 {:.2}) of its own (extraction frame and pass, CPU time, \
-         cheapest of {ROUNDS}). A query it answers uses no SIFT feature and costs its \
+         cheapest of {ROUNDS}, priced against SIFT over the whole image timed beside it, \
+         as the cache timed that SIFT). A query it answers uses no SIFT feature and costs its \
          decode, frame and pass; any other costs the pass besides the setting. `× full \
          search`: the median per-query ratio of the request time to the tiled full \
          search's (`× whole`: to the whole-image full search's, as the service answers \
@@ -390,11 +425,13 @@ mod tests {
                 answer: Some(answer),
                 frame_ms: 0.5,
                 pass_ms: 4.0,
+                sift_ms: 40.0,
             },
             Look {
                 answer: None,
                 frame_ms: 0.5,
                 pass_ms: 3.0,
+                sift_ms: 40.0,
             },
         ];
         let cost = QueryCost {
@@ -411,5 +448,13 @@ mod tests {
         assert_eq!((a.extract_ms, a.vote_ms, a.verify_ms), (6.5, 0.0, 0.0));
         assert_eq!(b.candidates, runs[0][1].candidates);
         assert_eq!((b.used, b.extract_ms, b.vote_ms), (60, 23.0, 1.0));
+        // priced against a cache that timed SIFT at half this sitting's
+        // speed: every time of the look doubles
+        let slow = looks[0].priced(80.0);
+        assert_eq!(
+            (slow.frame_ms, slow.pass_ms, slow.sift_ms),
+            (1.0, 8.0, 80.0)
+        );
+        assert_eq!(looks[1].priced(0.0).pass_ms, 3.0);
     }
 }
