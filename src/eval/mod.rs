@@ -197,6 +197,8 @@ pub struct Stages {
     pub sweep_s: f64,
     /// The verification pass (0 without).
     pub verify_s: f64,
+    /// The ORB pass's looks and rows (0 without).
+    pub orb_pass_s: f64,
     pub total_s: f64,
 }
 
@@ -1110,6 +1112,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             config, params, &dataset, &extract, &vocabs, &map_desc, &maps, &words, &plan, &swept,
         )?),
     };
+    stages.orb_pass_s = seconds_since(&mut clock);
     stages.total_s = started.elapsed().as_secs_f64();
 
     // 6. the report and its outputs

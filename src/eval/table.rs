@@ -527,7 +527,8 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
     format!(
         "### Time per query and stage (ms, median / p95 over seeds × queries × runs)\n\n\
          Wall time {:.1} s (extract {:.1} s, vocabularies {:.1} s, maps {:.1} s, quantize \
-         queries {:.1} s, calibrate {:.1} s, sweep {:.1} s). \
+         queries {:.1} s, calibrate {:.1} s, sweep {:.1} s, verification {:.1} s, ORB pass \
+         {:.1} s). \
          Queries are streamed in `{}` tiles, in the `{}` tile order, each tile's features \
          in the `{}` order, as the service does (its feature order is `random`): \
          extract = decode + SIFT of the tiles extracted (each tile timed when the query was \
@@ -550,6 +551,8 @@ fn timing_section(report: &Report, base: &SettingSummary) -> String {
         t.quantize_s,
         t.calibrate_s,
         t.sweep_s,
+        t.verify_s,
+        t.orb_pass_s,
         report.config.tiles,
         report.config.tile_order,
         report.config.feature_order,
