@@ -810,6 +810,16 @@ fn by_seed<'a>(
         .collect()
 }
 
+/// Each query's tiles in the grid, without the coarse pass (an outcome
+/// adds it when it started with it).
+fn grid_tiles(words: &Words) -> Vec<usize> {
+    words.plain[0]
+        .queries
+        .iter()
+        .map(|q| (q.tiles.len() - usize::from(q.coarse_first)).max(1))
+        .collect()
+}
+
 /// Stage 4: every setting summarized over seeds and runs, and the whole-image
 /// full search apart.
 fn summarize_settings(
@@ -819,13 +829,7 @@ fn summarize_settings(
     words: &Words,
     swept: &Swept,
 ) -> (Vec<SettingSummary>, Option<SettingSummary>) {
-    // the grid's tiles, without the coarse pass (an outcome adds it when it
-    // started with it)
-    let tiles_total: Vec<usize> = words.plain[0]
-        .queries
-        .iter()
-        .map(|q| (q.tiles.len() - usize::from(q.coarse_first)).max(1))
-        .collect();
+    let tiles_total = grid_tiles(words);
     let summaries = settings
         .par_iter()
         .enumerate()
@@ -908,11 +912,7 @@ fn replay_orb_pass(
             alone.push(verified(i));
         }
     }
-    let tiles_total: Vec<usize> = words.plain[0]
-        .queries
-        .iter()
-        .map(|q| (q.tiles.len() - usize::from(q.coarse_first)).max(1))
-        .collect();
+    let tiles_total = grid_tiles(words);
     let rows = alone
         .into_iter()
         .map(|i| {

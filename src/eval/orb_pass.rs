@@ -12,6 +12,7 @@
 
 use super::summary::{QueryCost, SettingSummary, Stat};
 use super::sweep::Outcome;
+use super::table::{pct, per_seed, points_lost};
 use super::timing::{self, Quantiles};
 use crate::dataset::ImageRef;
 use crate::features::{self, DecodeLimits, ExtractConfig, Frame, TileGrid};
@@ -286,23 +287,7 @@ impl OrbPassReport {
 /// search's.
 pub fn markdown(report: &OrbPassReport, settings: &[SettingSummary]) -> String {
     let p = &report.params;
-    let pct = |v: f64| format!("{:.1}", 100.0 * v);
-    let per_seed = |s: &Stat| {
-        let v: Vec<String> = s.per_seed.iter().map(|&x| pct(x)).collect();
-        v.join(" / ")
-    };
-    let lost = |base: &Stat, s: &Stat| {
-        let v: Vec<String> = base
-            .per_seed
-            .iter()
-            .zip(&s.per_seed)
-            .map(|(b, x)| match b - x {
-                d if d.abs() < 0.0005 => pct(0.0),
-                d => pct(d),
-            })
-            .collect();
-        v.join(" / ")
-    };
+    let seeds = |s: &Stat| per_seed(s, pct);
     let share = |s: &SettingSummary| {
         let whole = s
             .time_share_whole
@@ -338,9 +323,9 @@ pub fn markdown(report: &OrbPassReport, settings: &[SettingSummary]) -> String {
         p.words,
         p.grid,
         pct(report.answered.mean),
-        per_seed(&report.answered),
+        seeds(&report.answered),
         pct(report.right.mean),
-        per_seed(&report.right),
+        seeds(&report.right),
         report.pass_ms.median,
         report.pass_ms.p95,
     );
@@ -352,12 +337,12 @@ pub fn markdown(report: &OrbPassReport, settings: &[SettingSummary]) -> String {
                 s.label,
                 pct(s.fraction.mean),
                 share(s),
-                per_seed(&s.recall_at_1),
-                lost(&full.recall_at_1, &s.recall_at_1),
-                lost(&alone.recall_at_1, &s.recall_at_1),
-                per_seed(&s.recall_at_5),
-                lost(&full.recall_at_5, &s.recall_at_5),
-                lost(&alone.recall_at_5, &s.recall_at_5),
+                seeds(&s.recall_at_1),
+                points_lost(&full.recall_at_1, &s.recall_at_1),
+                points_lost(&alone.recall_at_1, &s.recall_at_1),
+                seeds(&s.recall_at_5),
+                points_lost(&full.recall_at_5, &s.recall_at_5),
+                points_lost(&alone.recall_at_5, &s.recall_at_5),
             );
         }
     }

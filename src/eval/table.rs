@@ -15,7 +15,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 /// A rate as a percentage with one decimal.
-fn pct(v: f64) -> String {
+pub(super) fn pct(v: f64) -> String {
     format!("{:.1}", 100.0 * v)
 }
 
@@ -156,7 +156,7 @@ fn paper_rows(columns: &[&SettingSummary], parameter: &str) -> Vec<Vec<String>> 
 
 /// Each vocabulary seed's value as `show` writes it, "–" where a run had
 /// none (NaN).
-fn per_seed(s: &Stat, show: impl Fn(f64) -> String) -> String {
+pub(super) fn per_seed(s: &Stat, show: impl Fn(f64) -> String) -> String {
     let values: Vec<String> = s
         .per_seed
         .iter()
@@ -333,7 +333,7 @@ fn full_search_like<'a>(report: &'a Report, s: &SettingSummary) -> Option<&'a Se
 
 /// Points of `full`'s recall that `s` loses on each vocabulary seed
 /// (negative where it gains), "–" where either has none.
-fn points_lost(full: &Stat, s: &Stat) -> String {
+pub(super) fn points_lost(full: &Stat, s: &Stat) -> String {
     let lost: Vec<String> = full
         .per_seed
         .iter()
