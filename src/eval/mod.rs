@@ -576,6 +576,17 @@ struct SweepPlan {
     verified_pairs: Vec<(usize, usize)>,
 }
 
+impl SweepPlan {
+    /// Setting `i` re-ranked by verification, when verification is on
+    /// (else `i` itself).
+    fn verified(&self, i: usize) -> usize {
+        self.verified_pairs
+            .iter()
+            .find(|p| p.0 == i)
+            .map_or(i, |p| p.1)
+    }
+}
+
 /// Stage 3a: the grids calibrated once, on the first vocabulary, so every
 /// seed runs the same settings; the explicit settings added; with
 /// verification, the full search and each explicit setting again,
@@ -738,10 +749,7 @@ fn replay_plan_orders(
     let replayed: Vec<usize> = plan
         .explicit
         .iter()
-        .map(|&i| {
-            let verified = plan.verified_pairs.iter().find(|p| p.0 == i);
-            verified.map_or(i, |p| p.1)
-        })
+        .map(|&i| plan.verified(i))
         .filter(|&i| plan.settings[i].rule.info().stops_early)
         .collect();
     let bar = progress_bar(
@@ -900,16 +908,10 @@ fn replay_orb_pass(
                     .collect()
             })
             .collect();
-    let verified = |i: usize| {
-        plan.verified_pairs
-            .iter()
-            .find(|p| p.0 == i)
-            .map_or(i, |p| p.1)
-    };
-    let mut alone: Vec<usize> = vec![verified(0)];
+    let mut alone: Vec<usize> = vec![plan.verified(0)];
     for &i in &plan.explicit {
-        if !alone.contains(&verified(i)) {
-            alone.push(verified(i));
+        if !alone.contains(&plan.verified(i)) {
+            alone.push(plan.verified(i));
         }
     }
     let tiles_total = grid_tiles(words);
@@ -929,7 +931,7 @@ fn replay_orb_pass(
             with.label = format!("{} +orb", with.label);
             orb_pass::OrbPassRow {
                 alone: i,
-                full: if setting.verify { verified(0) } else { 0 },
+                full: if setting.verify { plan.verified(0) } else { 0 },
                 with,
             }
         })
