@@ -898,16 +898,13 @@ fn replay_orb_pass(
         .iter()
         .map(|q| q.tiles.iter().map(|t| t.ms).sum())
         .collect();
-    let looks: Vec<Vec<orb_pass::Look>> =
-        orb_pass::look_all(&dataset.queries, extract, &passes, config.place_window)
-            .into_iter()
-            .map(|seed| {
-                seed.iter()
-                    .zip(&cached_sift)
-                    .map(|(l, &ms)| l.priced(ms))
-                    .collect()
-            })
-            .collect();
+    let mut looks = orb_pass::look_all(&dataset.queries, extract, &passes, config.place_window);
+    for look in looks
+        .iter_mut()
+        .flat_map(|seed| seed.iter_mut().zip(&cached_sift))
+    {
+        look.0.price(*look.1);
+    }
     let mut alone: Vec<usize> = vec![plan.verified(0)];
     for &i in &plan.explicit {
         if !alone.contains(&plan.verified(i)) {

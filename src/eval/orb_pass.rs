@@ -8,7 +8,7 @@
 //! outcome (its frame is the one SIFT goes on with, so it stays
 //! extraction's). Times are the thread's CPU time, the cheapest of
 //! [`ROUNDS`], as the cache times extraction, and priced against SIFT over
-//! the whole image timed beside them ([`Look::priced`]).
+//! the whole image timed beside them ([`Look::price`]).
 
 use super::summary::{QueryCost, SettingSummary, Stat};
 use super::sweep::Outcome;
@@ -18,6 +18,7 @@ use crate::dataset::ImageRef;
 use crate::features::{self, DecodeLimits, ExtractConfig, Frame, TileGrid};
 use crate::orb_pass::{Checked, OrbPassParams};
 use crate::pipeline::{OrbPass, extract_interleaved, progress_bar};
+use crate::search::rank::distinctness;
 use crate::search::{Ranked, StopKind};
 use cpu_time::ThreadTime;
 use rayon::prelude::*;
@@ -52,30 +53,24 @@ fn ids<S: serde::Serializer>(answer: &Option<Vec<Ranked>>, s: S) -> Result<S::Ok
 }
 
 /// The pass's answer scored as the service scores it (each checked image's
-/// inliers), with each image's distinctness by inliers:
-/// i / (i + the most inliers of a checked image more than `place_window`
-/// map images away), 1 when there is none.
+/// inliers), with each image's distinctness by inliers
+/// ([`distinctness`] against the checked images more than `place_window`
+/// map images away).
 pub fn ranked(answer: &[u32], checked: &[Checked], place_window: u32) -> Vec<Ranked> {
-    let of = |id: u32| checked.iter().find(|c| c.image == id);
+    let mut leaders: Vec<(f32, u32)> = checked
+        .iter()
+        .map(|c| (c.inliers as f32, c.image))
+        .collect();
+    leaders.sort_by(|a, b| b.0.total_cmp(&a.0));
     answer
         .iter()
-        .filter_map(|&id| of(id))
+        .filter_map(|&id| checked.iter().find(|c| c.image == id))
         .map(|c| {
-            let elsewhere = checked
-                .iter()
-                .filter(|o| o.image.abs_diff(c.image) > place_window)
-                .map(|o| o.inliers)
-                .max()
-                .unwrap_or(0);
-            let mine = c.inliers as f32;
+            let score = c.inliers as f32;
             Ranked {
                 id: c.image,
-                score: mine,
-                distinct: if mine + elsewhere as f32 > 0.0 {
-                    mine / (mine + elsewhere as f32)
-                } else {
-                    1.0
-                },
+                score,
+                distinct: distinctness(c.image, score, &leaders, place_window),
             }
         })
         .collect()
@@ -116,11 +111,27 @@ impl Look {
         pass_ms: 0.0,
         sift_ms: 0.0,
     };
+
+    /// Put the look's times in the units of the cache's (`cached_sift_ms`:
+    /// the query's SIFT over the whole image as the cache timed it): each
+    /// scaled by that over the SIFT timed beside the look. The cache's
+    /// times were taken in another sitting, and this machine's speed moves
+    /// between sittings; so priced, the pass costs what it costs beside
+    /// SIFT, not what the sitting it ran in made it cost.
+    pub fn price(&mut self, cached_sift_ms: f32) {
+        if self.sift_ms > 0.0 && cached_sift_ms > 0.0 {
+            let k = cached_sift_ms / self.sift_ms;
+            self.frame_ms *= k;
+            self.pass_ms *= k;
+            self.sift_ms = cached_sift_ms;
+        }
+    }
 }
 
-/// One query decoded once and looked at by every pass, [`ROUNDS`] times,
-/// each round also extracting SIFT over the whole image (its time is what
-/// [`Look::priced`] scales the pass's by).
+/// One query decoded once and looked at by every pass, [`ROUNDS`] times;
+/// each round makes the extraction frame once (every pass looks at it) and
+/// extracts SIFT over the whole image (its time is what [`Look::price`]
+/// scales the pass's by).
 fn look_one(
     query: &ImageRef,
     extract: &ExtractConfig,
@@ -128,20 +139,18 @@ fn look_one(
     place_window: u32,
 ) -> anyhow::Result<Vec<Look>> {
     let image = features::decode_file(&query.path, DecodeLimits::default(), extract.max_side)?;
-    let mut sift = Duration::MAX;
-    let mut kept: Vec<(Duration, Duration, Option<Vec<Ranked>>)> =
-        vec![(Duration::MAX, Duration::MAX, None); passes.len()];
+    let (mut sift, mut framed) = (Duration::MAX, Duration::MAX);
+    let mut kept: Vec<(Duration, Option<Vec<Ranked>>)> = vec![(Duration::MAX, None); passes.len()];
     for _ in 0..ROUNDS {
         let whole = extract_interleaved(&image, extract, &[TileGrid::WHOLE], 1)?;
         sift = sift.min(whole.first().map_or(Duration::ZERO, |w| w.extract));
-        for (pass, (frame_took, pass_took, answer)) in passes.iter().zip(&mut kept) {
-            let started = ThreadTime::now();
-            let frame = Frame::new(&image, extract)?;
-            let framed = started.elapsed();
+        let started = ThreadTime::now();
+        let frame = Frame::new(&image, extract)?;
+        framed = framed.min(started.elapsed());
+        for (pass, (took, answer)) in passes.iter().zip(&mut kept) {
             let looked = ThreadTime::now();
             let look = pass.look(&frame)?;
-            *pass_took = (*pass_took).min(looked.elapsed());
-            *frame_took = (*frame_took).min(framed);
+            *took = (*took).min(looked.elapsed());
             *answer = look
                 .answer
                 .map(|ids| ranked(&ids, &look.checked, place_window));
@@ -150,35 +159,13 @@ fn look_one(
     let ms = |d: Duration| (d.as_secs_f64() * 1e3) as f32;
     Ok(kept
         .into_iter()
-        .map(|(frame, pass, answer)| Look {
+        .map(|(pass, answer)| Look {
             answer,
-            frame_ms: ms(frame),
+            frame_ms: ms(framed),
             pass_ms: ms(pass),
             sift_ms: ms(sift),
         })
         .collect())
-}
-
-impl Look {
-    /// The look with its times in the units of the cache's (`cached_sift_ms`:
-    /// the query's SIFT over the whole image as the cache timed it): each
-    /// scaled by that over the SIFT timed beside the look. The cache's
-    /// times were taken in another sitting, and this machine's speed moves
-    /// between sittings; so priced, the pass costs what it costs beside
-    /// SIFT, not what the sitting it ran in made it cost.
-    pub fn priced(&self, cached_sift_ms: f32) -> Look {
-        let k = if self.sift_ms > 0.0 && cached_sift_ms > 0.0 {
-            cached_sift_ms / self.sift_ms
-        } else {
-            1.0
-        };
-        Look {
-            answer: self.answer.clone(),
-            frame_ms: self.frame_ms * k,
-            pass_ms: self.pass_ms * k,
-            sift_ms: cached_sift_ms,
-        }
-    }
 }
 
 /// A setting's outcomes `runs[run][query]` with the pass first (`looks`
@@ -297,7 +284,7 @@ pub fn markdown(report: &OrbPassReport, settings: &[SettingSummary]) -> String {
     let mut out = format!(
         "## The ORB pass first\n\n\
          The service's ORB pass (`[orb_pass]`: the top {} ORB-voted map images checked, \
-         pick `nearest-{}` with at least {} inliers, |ln s| ≤ {}{}; {} binary words; \
+         `{}`; {} binary words; \
          keypoints `{}`) looked at every query before each setting: it answered {} % of \
          the queries (per vocabulary seed {}), {} % of them right (per seed {}), in a \
          median {:.2} ms (p95 {:.2}) of its own (extraction frame and pass, CPU time, \
@@ -312,14 +299,7 @@ pub fn markdown(report: &OrbPassReport, settings: &[SettingSummary]) -> String {
          | setting | % features | × full search | × whole | recall@1, per seed | lost to the full search | lost to the setting alone | recall@5, per seed | lost to the full search | lost to the setting alone |\n\
          | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
         p.top,
-        p.share,
-        p.floor,
-        p.window,
-        if p.agree {
-            ", agreeing with the votes' first"
-        } else {
-            ""
-        },
+        p.setting().label(),
         p.words,
         p.grid,
         pct(report.answered.mean),
@@ -435,11 +415,14 @@ mod tests {
         assert_eq!((b.used, b.extract_ms, b.vote_ms), (60, 23.0, 1.0));
         // priced against a cache that timed SIFT at half this sitting's
         // speed: every time of the look doubles
-        let slow = looks[0].priced(80.0);
+        let mut slow = looks[0].clone();
+        slow.price(80.0);
         assert_eq!(
             (slow.frame_ms, slow.pass_ms, slow.sift_ms),
             (1.0, 8.0, 80.0)
         );
-        assert_eq!(looks[1].priced(0.0).pass_ms, 3.0);
+        let mut unknown = looks[1].clone();
+        unknown.price(0.0);
+        assert_eq!((unknown.pass_ms, unknown.sift_ms), (3.0, 40.0));
     }
 }
