@@ -1,8 +1,8 @@
 //! An ORB pass before SIFT, measured against the service's answers: a
 //! prototype of a cheap first look that would answer the easy queries
 //! without SIFT, as the library has it (`bowloc::orb_pass`). Per query, on
-//! the service's 640 px frame: ORB (1000 keypoints, spread over a grid of
-//! cells, `ORB_PASS_GRID`; `bowloc::features::orb`), each descriptor's
+//! the service's 640 px frame: ORB (`ORB_PASS_KEYPOINTS`, by default the
+//! service's, spread over a grid of cells, `ORB_PASS_GRID`; `bowloc::features::orb`), each descriptor's
 //! binary word (`bowloc::vocabulary::binary`, K words by k-majority over
 //! the map's ORB descriptors, drawn with the SIFT vocabulary's seed),
 //! tf-idf votes over the map images, and the top 10 (`ORB_PASS_TOP`)
@@ -50,7 +50,7 @@ use bowloc::dataset::Dataset;
 use bowloc::eval::machine::Cpu;
 use bowloc::features::{DecodeLimits, Frame, TileGrid, decode};
 use bowloc::orb_pass::params::parse_grid;
-use bowloc::orb_pass::{Checked, ORB_FEATURES, OrbPassParams, Pick, Setting, answer};
+use bowloc::orb_pass::{Checked, OrbPassParams, Pick, Setting, answer};
 use bowloc::pipeline::{OrbPass, build_orb_side};
 use bowloc::search::SearchOptions;
 use bowloc::server::config::Config;
@@ -100,9 +100,22 @@ const SWEEP_MARGINS: [f64; 3] = [0.0, 1.0, 1.25];
 /// 4x3): ORB detects four times as many corners and the strongest of each
 /// cell are kept, so the keypoints cover the frame. `ORB_PASS_GRID=none`:
 /// ORB's own strongest corners, wherever they are.
-fn grid_from_env() -> anyhow::Result<Option<(usize, usize)>> {
+fn grid_from_env() -> anyhow::Result<String> {
     let v = std::env::var("ORB_PASS_GRID").unwrap_or_else(|_| "4x3".into());
-    parse_grid(&v).map_err(|e| anyhow::anyhow!("ORB_PASS_GRID={e}"))
+    parse_grid(&v).map_err(|e| anyhow::anyhow!("ORB_PASS_GRID={e}"))?;
+    Ok(v)
+}
+
+/// ORB keypoints per image (`ORB_PASS_KEYPOINTS`, default the service's).
+fn keypoints_from_env() -> anyhow::Result<usize> {
+    match std::env::var("ORB_PASS_KEYPOINTS") {
+        Err(_) => Ok(OrbPassParams::default().keypoints),
+        Ok(v) => v
+            .parse()
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(|| anyhow::anyhow!("ORB_PASS_KEYPOINTS={v}: want a positive count")),
+    }
 }
 
 /// What the pass found for one query: each checked candidate in vote
@@ -135,7 +148,6 @@ fn main() -> anyhow::Result<()> {
     // scripts/latency.sh takes them
     let every: usize = rest.first().map_or(Ok(1), |s| s.parse())?;
     anyhow::ensure!(every > 0, "EVERY must be at least 1");
-    let (grid, top) = (grid_from_env()?, top_from_env()?);
     // as the binary does: image buffers kept mapped, one OpenCV thread
     bowloc::features::keep_image_buffers();
     bowloc::features::set_opencv_threads(1);
@@ -160,10 +172,13 @@ fn main() -> anyhow::Result<()> {
     let seed = localizer.vocab.meta().seed;
     let read = |r: &bowloc::dataset::ImageRef| std::fs::read(&r.path);
     let params = OrbPassParams {
-        top,
+        top: top_from_env()?,
+        keypoints: keypoints_from_env()?,
+        grid: grid_from_env()?,
         ..OrbPassParams::default()
     };
-    let side = build_orb_side(&localizer, &dataset.map, params.words, grid)?;
+    params.validate().map_err(anyhow::Error::msg)?;
+    let side = build_orb_side(&localizer, &dataset.map, &params)?;
     let words = side.vocabulary.len();
     let orb_pass = OrbPass::new(side, &params);
 
@@ -229,12 +244,13 @@ fn main() -> anyhow::Result<()> {
 
     let cpu = Cpu::here();
     println!(
-        "{}: {} queries, {} map images; SIFT K = {}, vocabulary seed {seed}; ORB {ORB_FEATURES} features, K = {words}, top {} verified; {} ({}, {} CPUs), one thread",
+        "{}: {} queries, {} map images; SIFT K = {}, vocabulary seed {seed}; ORB {} features, K = {words}, top {} verified; {} ({}, {} CPUs), one thread",
         dataset.name,
         dataset.queries.len(),
         dataset.map.len(),
         localizer.vocab.words(),
-        top,
+        params.keypoints,
+        params.top,
         cpu.model,
         cpu.instruction_set,
         cpu.cpus

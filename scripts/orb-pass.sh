@@ -22,7 +22,8 @@
 # swapped (scripts/reversed-datasets.sh; their maps built on first use)
 # and checks every choice made on gardens-point on them too, as two more
 # sets held out; they are never chosen on.
-# ORB_PASS_GRID and ORB_PASS_TOP pass to the example (its module comment).
+# ORB_PASS_GRID, ORB_PASS_TOP and ORB_PASS_KEYPOINTS pass to the example (its
+# module comment).
 # SWEEP_KEEP=FILE keeps the sweep's lines; SWEEP_FROM=FILE chooses from
 # kept lines without measuring again; CHOOSE_LOSS lists the losses allowed
 # where chosen (default "0.5 1", each in turn).

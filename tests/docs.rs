@@ -50,13 +50,13 @@ fn words_of(doc: &str) -> String {
 
 #[test]
 fn the_orb_pass_defaults_in_the_docs_are_the_codes() {
-    use bowloc::orb_pass::{ORB_FEATURES, OrbPassParams};
+    use bowloc::orb_pass::OrbPassParams;
     let d = OrbPassParams::default();
     let stated = [
         (
             "docs/service.md",
             vec![
-                format!("ORB's {ORB_FEATURES} strongest corners"),
+                format!("ORB's {} strongest corners", d.keypoints),
                 format!("({} by default, k-majority", d.words),
                 format!("`orb_pass.top` ({})", d.top),
                 format!("`orb_pass.floor` ({}) inliers", d.floor),
@@ -73,7 +73,7 @@ fn the_orb_pass_defaults_in_the_docs_are_the_codes() {
         ),
         (
             "config/default.toml",
-            vec![format!("ORB ({ORB_FEATURES} corners)")],
+            vec![format!("ORB ({} corners)", d.keypoints)],
         ),
     ];
     for (doc, phrases) in stated {

@@ -151,6 +151,9 @@ struct OrbPassEvalArgs {
     /// With --orb-pass: binary words of the ORB side's vocabulary.
     #[arg(long, default_value_t = OrbPassParams::default().words)]
     orb_words: usize,
+    /// With --orb-pass: ORB keypoints per image.
+    #[arg(long, default_value_t = OrbPassParams::default().keypoints)]
+    orb_keypoints: usize,
     /// With --orb-pass: `none` (ORB's strongest corners) or COLSxROWS.
     #[arg(long, default_value_t = OrbPassParams::default().grid)]
     orb_grid: String,
@@ -168,6 +171,7 @@ impl OrbPassEvalArgs {
             share: self.orb_share,
             agree: self.orb_agree,
             words: self.orb_words,
+            keypoints: self.orb_keypoints,
             grid: self.orb_grid.clone(),
             ..OrbPassParams::default()
         };

@@ -53,6 +53,9 @@ pub struct OrbPassArgs {
     /// Binary words of the side's vocabulary.
     #[arg(long, default_value_t = OrbPassParams::default().words)]
     words: usize,
+    /// ORB keypoints kept per map image (queries keep as many).
+    #[arg(long, default_value_t = OrbPassParams::default().keypoints)]
+    keypoints: usize,
     /// Where ORB's keypoints come from: `none` (ORB's own strongest
     /// corners) or `COLSxROWS` (spread over a grid of cells).
     #[arg(long, default_value_t = OrbPassParams::default().grid)]
@@ -249,18 +252,14 @@ fn build(a: BuildArgs) -> anyhow::Result<()> {
 fn orb_pass(a: OrbPassArgs) -> anyhow::Result<()> {
     let params = OrbPassParams {
         words: a.words,
+        keypoints: a.keypoints,
         grid: a.grid.clone(),
         ..OrbPassParams::default()
     };
     params.validate().map_err(anyhow::Error::msg)?;
     let localizer = Localizer::open(&a.vocab, &a.map, true)?;
     let images = image_list(&a.images)?;
-    let side = bowloc::pipeline::build_orb_side(
-        &localizer,
-        &images,
-        params.words,
-        params.grid().map_err(anyhow::Error::msg)?,
-    )?;
+    let side = bowloc::pipeline::build_orb_side(&localizer, &images, &params)?;
     let out = a
         .out
         .unwrap_or_else(|| bowloc::orb_pass::file::path_beside(&a.map));

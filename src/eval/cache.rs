@@ -653,7 +653,7 @@ pub fn orb_side(
     let path = path_beside(&map_path(dir, vocab, map));
     let grid = params.grid().map_err(anyhow::Error::msg)?;
     let seed = vocab.meta().seed;
-    let wanted = OrbSideMeta::for_map(index.meta(), params.words, seed, grid);
+    let wanted = OrbSideMeta::for_map(index.meta(), params.words, seed, params.keypoints, grid);
     if path.exists() {
         match OrbSide::open(&path) {
             Ok(side) if side.meta == wanted => {
@@ -666,7 +666,7 @@ pub fn orb_side(
             Err(e) => tracing::warn!("unusable cached ORB side, rebuilding: {e:#}"),
         }
     }
-    let side = crate::pipeline::orb_side_of(index, extract, seed, images, params.words, grid)?;
+    let side = crate::pipeline::orb_side_of(index, extract, seed, images, params)?;
     side.save(&path)?;
     Ok(side)
 }

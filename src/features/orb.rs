@@ -3,7 +3,7 @@
 //! ORB's own strongest corners or corners spread over a grid of cells.
 
 use super::{FeatureError, Frame};
-use crate::orb_pass::{ORB_FEATURES, OrbImage};
+use crate::orb_pass::OrbImage;
 use crate::vocabulary::binary::from_rows;
 use opencv::core::{KeyPoint, Mat, Ptr, Vector, no_array};
 use opencv::features2d::{ORB, ORB_ScoreType};
@@ -13,26 +13,32 @@ use opencv::prelude::*;
 /// threshold, and the patch its descriptor reads).
 const EDGE: i32 = 31;
 
-/// An ORB detector, and the cells its keypoints are spread over (`None`:
-/// ORB's own strongest corners, wherever they are).
+/// An ORB detector: the keypoints it keeps, and the cells they are spread
+/// over (`None`: ORB's own strongest corners, wherever they are).
 pub struct OrbDetector {
     orb: Ptr<ORB>,
+    keypoints: usize,
     grid: Option<(usize, usize)>,
 }
 
 impl OrbDetector {
-    /// With a grid of `cols`×`rows` cells, ORB detects four times
-    /// [`ORB_FEATURES`] corners and the strongest of each cell are kept, an
-    /// equal share each, so the keypoints cover the frame.
-    pub fn new(grid: Option<(usize, usize)>) -> Result<Self, FeatureError> {
-        if let Some((cols, rows)) = grid
-            && !(1..=ORB_FEATURES).contains(&(cols * rows))
-        {
+    /// At most `keypoints` corners. With a grid of `cols`×`rows` cells, ORB
+    /// detects four times as many and the strongest of each cell are kept,
+    /// an equal share each, so the keypoints cover the frame.
+    pub fn new(keypoints: usize, grid: Option<(usize, usize)>) -> Result<Self, FeatureError> {
+        if keypoints == 0 || i32::try_from(keypoints.saturating_mul(4)).is_err() {
             return Err(FeatureError::OpenCv(format!(
-                "an ORB grid of {cols}x{rows} cells: want 1 to {ORB_FEATURES} cells"
+                "{keypoints} ORB keypoints: want 1 or more"
             )));
         }
-        let features = ORB_FEATURES * if grid.is_some() { 4 } else { 1 };
+        if let Some((cols, rows)) = grid
+            && !(1..=keypoints).contains(&cols.saturating_mul(rows))
+        {
+            return Err(FeatureError::OpenCv(format!(
+                "an ORB grid of {cols}x{rows} cells: want 1 to {keypoints} cells"
+            )));
+        }
+        let features = keypoints * if grid.is_some() { 4 } else { 1 };
         let orb = ORB::create(
             features as i32,
             1.2,
@@ -44,7 +50,11 @@ impl OrbDetector {
             31,
             20,
         )?;
-        Ok(Self { orb, grid })
+        Ok(Self {
+            orb,
+            keypoints,
+            grid,
+        })
     }
 
     /// ORB of the extraction frame.
@@ -63,7 +73,15 @@ impl OrbDetector {
             Some((cols, rows)) => {
                 let mut all = Vector::<KeyPoint>::new();
                 self.orb.detect(mat, &mut all, &no_array())?;
-                keys = spread(&all, cols, rows, mat.cols() as f32, mat.rows() as f32);
+                let share = self.keypoints / (cols * rows);
+                keys = spread(
+                    &all,
+                    cols,
+                    rows,
+                    share,
+                    mat.cols() as f32,
+                    mat.rows() as f32,
+                );
                 self.orb.compute(mat, &mut keys, &mut raw)?;
             }
         }
@@ -79,16 +97,22 @@ impl OrbDetector {
     }
 }
 
-/// The strongest keypoints of each of `cols`×`rows` cells of a `w`×`h`
-/// frame, an equal share of [`ORB_FEATURES`] each.
-fn spread(all: &Vector<KeyPoint>, cols: usize, rows: usize, w: f32, h: f32) -> Vector<KeyPoint> {
+/// The `share` strongest keypoints of each of `cols`×`rows` cells of a
+/// `w`×`h` frame.
+fn spread(
+    all: &Vector<KeyPoint>,
+    cols: usize,
+    rows: usize,
+    share: usize,
+    w: f32,
+    h: f32,
+) -> Vector<KeyPoint> {
     let mut cells: Vec<Vec<KeyPoint>> = vec![Vec::new(); cols * rows];
     for k in all.iter() {
         let c = ((k.pt().x / w * cols as f32) as usize).min(cols - 1);
         let r = ((k.pt().y / h * rows as f32) as usize).min(rows - 1);
         cells[r * cols + c].push(k);
     }
-    let share = ORB_FEATURES / (cols * rows);
     let mut kept = Vector::<KeyPoint>::new();
     for mut cell in cells {
         cell.sort_by(|a, b| b.response().total_cmp(&a.response()));
@@ -107,12 +131,20 @@ mod tests {
         let config = ExtractConfig::default();
         let bytes = warm_up_image(&config, DecodeLimits::default().max_pixels).unwrap();
         let image = decode(&bytes, DecodeLimits::default(), config.max_side).unwrap();
-        for grid in [None, Some((4, 3))] {
+        for (keypoints, grid) in [
+            (1000, None),
+            (1000, Some((4, 3))),
+            (300, None),
+            (300, Some((4, 3))),
+        ] {
             let frame = Frame::new(&image, &config).unwrap();
             let (w, h) = frame.size();
-            let orb = OrbDetector::new(grid).unwrap().detect(&frame).unwrap();
+            let orb = OrbDetector::new(keypoints, grid)
+                .unwrap()
+                .detect(&frame)
+                .unwrap();
             assert!(!orb.centres.is_empty(), "{grid:?}: no ORB keypoints");
-            assert!(orb.centres.len() <= ORB_FEATURES);
+            assert!(orb.centres.len() <= keypoints, "{keypoints} {grid:?}");
             assert_eq!(orb.centres.len(), orb.descriptors.len());
             assert!(
                 orb.centres
@@ -120,7 +152,9 @@ mod tests {
                     .all(|&[x, y]| (0.0..w as f32).contains(&x) && (0.0..h as f32).contains(&y))
             );
         }
-        assert!(OrbDetector::new(Some((0, 3))).is_err());
+        assert!(OrbDetector::new(1000, Some((0, 3))).is_err());
+        assert!(OrbDetector::new(10, Some((4, 3))).is_err());
+        assert!(OrbDetector::new(0, None).is_err());
     }
 
     /// The frame of a `w`×`h` image, uniform grey or noise.
@@ -148,7 +182,7 @@ mod tests {
 
     #[test]
     fn a_blank_frame_has_no_keypoints() {
-        let orb = OrbDetector::new(None)
+        let orb = OrbDetector::new(1000, None)
             .unwrap()
             .detect(&frame_of(64, 48, false))
             .unwrap();
@@ -159,7 +193,7 @@ mod tests {
     fn a_frame_too_small_for_orb_has_no_keypoints_not_an_error() {
         for (w, h) in [(1, 1), (8, 8), (200, 62), (62, 200)] {
             for grid in [None, Some((4, 3))] {
-                let orb = OrbDetector::new(grid)
+                let orb = OrbDetector::new(1000, grid)
                     .unwrap()
                     .detect(&frame_of(w, h, true))
                     .unwrap();
@@ -167,7 +201,7 @@ mod tests {
             }
         }
         // just past the border's width, noise has corners
-        let orb = OrbDetector::new(None)
+        let orb = OrbDetector::new(1000, None)
             .unwrap()
             .detect(&frame_of(96, 96, true))
             .unwrap();

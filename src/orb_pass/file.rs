@@ -32,14 +32,28 @@ pub struct OrbSideMeta {
     /// Binary words of its vocabulary, and the seed they were drawn with.
     pub words: usize,
     pub seed: u64,
-    /// The cells ORB's keypoints were spread over (`None`: ORB's own
+    /// ORB keypoints kept per image (a side written before it was recorded
+    /// kept 1000), and the cells they were spread over (`None`: ORB's own
     /// strongest corners); queries are detected the same way.
+    #[serde(default = "keypoints_before_recorded")]
+    pub keypoints: usize,
     pub grid: Option<(usize, usize)>,
+}
+
+/// The ORB keypoints every side kept before the side recorded how many.
+fn keypoints_before_recorded() -> usize {
+    1000
 }
 
 impl OrbSideMeta {
     /// The identity of `map` with how the side was built.
-    pub fn for_map(map: &MapMeta, words: usize, seed: u64, grid: Option<(usize, usize)>) -> Self {
+    pub fn for_map(
+        map: &MapMeta,
+        words: usize,
+        seed: u64,
+        keypoints: usize,
+        grid: Option<(usize, usize)>,
+    ) -> Self {
         Self {
             map_name: map.name.clone(),
             map_images: map.images,
@@ -48,6 +62,7 @@ impl OrbSideMeta {
             map_generation: map.generation,
             words,
             seed,
+            keypoints,
             grid,
         }
     }
@@ -163,7 +178,7 @@ mod tests {
             ..MapMeta::default()
         };
         OrbSide {
-            meta: OrbSideMeta::for_map(&map, 2, 5, None),
+            meta: OrbSideMeta::for_map(&map, 2, 5, 40, None),
             vocabulary: BinaryVocabulary::from_words(vec![d(1), d(2)]),
             images: vec![
                 OrbImage {
@@ -201,6 +216,15 @@ mod tests {
             path_beside(Path::new("data/x/map.bowmap")),
             Path::new("data/x/map.orbpass")
         );
+    }
+
+    #[test]
+    fn a_side_written_before_it_recorded_its_keypoints_kept_1000() {
+        let mut meta = serde_json::to_value(side().meta).unwrap();
+        meta.as_object_mut().unwrap().remove("keypoints");
+        let read: OrbSideMeta = serde_json::from_value(meta).unwrap();
+        assert_eq!(read.keypoints, 1000);
+        assert_eq!(read.grid, None);
     }
 
     #[test]

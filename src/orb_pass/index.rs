@@ -8,6 +8,8 @@ use crate::geometry::matches::Correspondences;
 use crate::geometry::relative_scale::relative_scale;
 use crate::geometry::verify::{ModelFit, fit_inliers};
 use crate::index::build::{ImageWords, MapBuilder, weigh};
+#[cfg(target_arch = "x86_64")]
+use crate::vocabulary::binary::has_popcnt;
 use crate::vocabulary::binary::{BinaryDescriptor, BinaryVocabulary, hamming};
 use rayon::prelude::*;
 
@@ -124,6 +126,23 @@ impl OrbIndex {
     /// image `m`: each query feature with the map feature of its word whose
     /// descriptor is nearest, if at most [`MAX_PAIR_HAMMING`] bits away.
     pub fn pairs(&self, query: &OrbImage, words: &[u32], m: u32) -> Correspondences {
+        #[cfg(target_arch = "x86_64")]
+        if has_popcnt() {
+            // SAFETY: the CPU has POPCNT
+            return unsafe { self.pairs_popcnt(query, words, m) };
+        }
+        self.pairs_of(query, words, m)
+    }
+
+    /// [`OrbIndex::pairs`] compiled with POPCNT.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "popcnt")]
+    fn pairs_popcnt(&self, query: &OrbImage, words: &[u32], m: u32) -> Correspondences {
+        self.pairs_of(query, words, m)
+    }
+
+    #[inline(always)]
+    fn pairs_of(&self, query: &OrbImage, words: &[u32], m: u32) -> Correspondences {
         let (map, by_word) = (&self.images[m as usize], &self.by_word[m as usize]);
         let mut c = Correspondences::default();
         for ((&w, d), &centre) in words.iter().zip(&query.descriptors).zip(&query.centres) {
@@ -239,5 +258,13 @@ mod tests {
             (checked[1].image, checked[1].inliers, checked[1].scale),
             (0, 0, None)
         );
+        // the pairs are the same with POPCNT (where the CPU has it) as without
+        for m in 0..2 {
+            let (fast, portable) = (
+                index.pairs(&query, &words, m),
+                index.pairs_of(&query, &words, m),
+            );
+            assert_eq!((fast.query, fast.map), (portable.query, portable.map));
+        }
     }
 }

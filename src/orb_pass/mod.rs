@@ -22,6 +22,9 @@ pub use index::{Checked, OrbImage, OrbIndex};
 pub use params::{FIT, OrbPassParams};
 pub use pick::{PLACE_APART, Pick, Setting, answer};
 
-/// ORB keypoints a query or map image keeps, and so the most cells a grid
-/// may spread them over.
-pub const ORB_FEATURES: usize = 1000;
+/// ORB keypoints a query or map image keeps by default
+/// (`orb_pass.keypoints`).
+pub const ORB_FEATURES: usize = 2000;
+
+/// The most ORB keypoints `orb_pass.keypoints` may ask for.
+pub const MAX_ORB_FEATURES: usize = 20_000;

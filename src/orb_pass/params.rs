@@ -2,7 +2,7 @@
 //! ([`OrbPassParams`]), and the similarity its candidates are verified with
 //! ([`FIT`]).
 
-use super::{ORB_FEATURES, Pick, Setting};
+use super::{MAX_ORB_FEATURES, ORB_FEATURES, Pick, Setting};
 use crate::geometry::verify::{Estimator, FitParams, Model};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -43,6 +43,9 @@ pub struct OrbPassParams {
     pub agree: bool,
     /// Binary words of the side's vocabulary, when it is built.
     pub words: usize,
+    /// ORB keypoints each map image keeps, when the side is built (queries
+    /// keep as many as their side's images did).
+    pub keypoints: usize,
     /// Where ORB's keypoints come from, when the side is built: `none`,
     /// ORB's own strongest corners, or `COLSxROWS`, spread over a grid.
     pub grid: String,
@@ -59,12 +62,14 @@ impl Default for OrbPassParams {
             share: 0.9,
             agree: true,
             words: 1000,
+            keypoints: ORB_FEATURES,
             grid: "none".into(),
         }
     }
 }
 
-/// `none`, or `COLSxROWS` with 1 to [`ORB_FEATURES`] cells.
+/// `none`, or `COLSxROWS` with 1 to [`MAX_ORB_FEATURES`] cells (a grid
+/// needs at least a keypoint a cell: [`OrbPassParams::validate`]).
 pub fn parse_grid(v: &str) -> Result<Option<(usize, usize)>, String> {
     if v == "none" {
         return Ok(None);
@@ -73,10 +78,10 @@ pub fn parse_grid(v: &str) -> Result<Option<(usize, usize)>, String> {
         .and_then(|(c, r)| Some((c.parse().ok()?, r.parse().ok()?)))
         .filter(|&(c, r): &(usize, usize)| {
             c.checked_mul(r)
-                .is_some_and(|n| (1..=ORB_FEATURES).contains(&n))
+                .is_some_and(|n| (1..=MAX_ORB_FEATURES).contains(&n))
         })
         .map(Some)
-        .ok_or_else(|| format!("`{v}`: want COLSxROWS (1 to {ORB_FEATURES} cells) or none"))
+        .ok_or_else(|| format!("`{v}`: want COLSxROWS (1 to {MAX_ORB_FEATURES} cells) or none"))
 }
 
 impl OrbPassParams {
@@ -117,7 +122,19 @@ impl OrbPassParams {
         if !(2..=65536).contains(&self.words) {
             return Err(format!("words must be 2 to 65536, got {}", self.words));
         }
-        self.grid().map(|_| ())
+        if !(1..=MAX_ORB_FEATURES).contains(&self.keypoints) {
+            return Err(format!(
+                "keypoints must be 1 to {MAX_ORB_FEATURES}, got {}",
+                self.keypoints
+            ));
+        }
+        match self.grid()? {
+            Some((cols, rows)) if cols * rows > self.keypoints => Err(format!(
+                "grid {cols}x{rows} has more cells than the {} keypoints to spread over them",
+                self.keypoints
+            )),
+            _ => Ok(()),
+        }
     }
 }
 
@@ -174,9 +191,24 @@ mod tests {
             })
             .contains("grid")
         );
+        assert!(
+            bad(OrbPassParams {
+                keypoints: 0,
+                ..Default::default()
+            })
+            .contains("keypoints")
+        );
+        assert!(
+            bad(OrbPassParams {
+                keypoints: 100,
+                grid: "20x10".into(),
+                ..Default::default()
+            })
+            .contains("more cells")
+        );
         assert_eq!(parse_grid("4x3"), Ok(Some((4, 3))));
         assert!(parse_grid("0x3").is_err());
-        assert!(parse_grid("40x30").is_err());
+        assert!(parse_grid("400x300").is_err());
         // a product past usize is refused, not wrapped
         assert!(parse_grid(&format!("{}x3", usize::MAX)).is_err());
     }

@@ -24,24 +24,16 @@ const ITERATIONS: usize = 8;
 /// The ORB side of `localizer`'s map file, built from its images
 /// (`images`, in map order: each one's name must be the map image's) in the
 /// extraction frame of its vocabulary: ORB over every image (an unreadable
-/// one has none), then `words` binary words drawn with the vocabulary's
-/// seed.
+/// one has none; `params`' keypoints and grid), then `params.words` binary
+/// words drawn with the vocabulary's seed.
 pub fn build_orb_side(
     localizer: &Localizer,
     images: &[ImageRef],
-    words: usize,
-    grid: Option<(usize, usize)>,
+    params: &OrbPassParams,
 ) -> anyhow::Result<OrbSide> {
     let snapshot = localizer.map.snapshot();
     let seed = localizer.vocab.meta().seed;
-    orb_side_of(
-        snapshot.base(),
-        &localizer.extract,
-        seed,
-        images,
-        words,
-        grid,
-    )
+    orb_side_of(snapshot.base(), &localizer.extract, seed, images, params)
 }
 
 /// [`build_orb_side`] for the map `base`, whose images were extracted with
@@ -51,10 +43,11 @@ pub fn orb_side_of(
     config: &ExtractConfig,
     seed: u64,
     images: &[ImageRef],
-    words: usize,
-    grid: Option<(usize, usize)>,
+    params: &OrbPassParams,
 ) -> anyhow::Result<OrbSide> {
     let map = base.meta();
+    let (words, keypoints) = (params.words, params.keypoints);
+    let grid = params.grid().map_err(anyhow::Error::msg)?;
     if images.len() != map.images {
         bail!(
             "{} images given for a map of {} images: give the list the map was built from",
@@ -74,7 +67,7 @@ pub fn orb_side_of(
         );
     }
     // a grid ORB cannot spread over is named before any image is read
-    OrbDetector::new(grid)?;
+    OrbDetector::new(keypoints, grid)?;
     let bar = progress_bar(images.len() as u64, "ORB over the map");
     let orb: Vec<OrbImage> = images
         .par_iter()
@@ -83,7 +76,7 @@ pub fn orb_side_of(
                 let bytes = std::fs::read(&r.path)
                     .with_context(|| format!("{}: cannot read", r.path.display()))?;
                 let image = features::decode(&bytes, DecodeLimits::default(), config.max_side)?;
-                Ok(OrbDetector::new(grid)?.detect(&Frame::new(&image, config)?)?)
+                Ok(OrbDetector::new(keypoints, grid)?.detect(&Frame::new(&image, config)?)?)
             };
             let orb = read().unwrap_or_else(|e| {
                 tracing::warn!("{e:#}: no ORB features for it");
@@ -100,7 +93,7 @@ pub fn orb_side_of(
         .collect();
     let vocabulary = BinaryVocabulary::train(&all, words, ITERATIONS, seed);
     Ok(OrbSide {
-        meta: OrbSideMeta::for_map(map, vocabulary.len(), seed, grid),
+        meta: OrbSideMeta::for_map(map, vocabulary.len(), seed, keypoints, grid),
         vocabulary,
         images: orb,
     })
@@ -172,7 +165,7 @@ impl OrbPass {
     /// best-voted checked, and the setting's answer if it answers.
     pub fn look(&self, frame: &Frame) -> Result<Look, FeatureError> {
         let started = Instant::now();
-        let query = OrbDetector::new(self.meta.grid)?.detect(frame)?;
+        let query = OrbDetector::new(self.meta.keypoints, self.meta.grid)?.detect(frame)?;
         let words = self.vocabulary.words_of(&query.descriptors);
         let checked = self.index.check(&query, &words, self.top, &self.fit);
         Ok(Look {

@@ -143,12 +143,7 @@ fn load_orb_pass(
             let list = config.bootstrap.dataset.join("map.txt");
             progress.begin("the map's ORB side");
             tracing::info!(path = %path.display(), "bootstrap: building the map's ORB side");
-            let side = crate::pipeline::build_orb_side(
-                localizer,
-                &image_list(&list)?,
-                params.words,
-                params.grid().map_err(anyhow::Error::msg)?,
-            )?;
+            let side = crate::pipeline::build_orb_side(localizer, &image_list(&list)?, params)?;
             side.save(&path)?;
             crate::pipeline::OrbPass::new(side, params)
         }
