@@ -30,8 +30,9 @@
 # sequence filter's stop (`sequence.rule`) decides where they stop; the full
 # search is sent alone, as before.
 # LATENCY_ORB_PASS=1: the ORB pass looks at each of the default's requests
-# first ([orb_pass] enabled; each map's ORB side built beside it on first
-# use with `bowloc map orb-pass`); the comparison says how many it answered.
+# first ([orb_pass] enabled; each map's ORB side built beside it with
+# `bowloc map orb-pass`, afresh each run); the comparison says how many it
+# answered.
 # The comparison also prints recall@1 and recall@5 of the full search's and
 # the default's answers against the dataset's ground truth.
 # The server learns the coarse pass (`tiles = "…,auto"`) from the requests
@@ -61,7 +62,8 @@ map_for() {
   dataset_map "$src" "$words" "$1" "$base" "$map_name" >&2
   local dir
   dir=$(map_dir "$base" "$1")
-  if [ -n "${LATENCY_ORB_PASS:-}" ] && [ ! -f "$dir/map.orbpass" ]; then
+  # the side is built afresh, so that it is the current default's
+  if [ -n "${LATENCY_ORB_PASS:-}" ]; then
     "$BOWLOC_BIN" map orb-pass --vocab "$dir/vocab.bowvoc" --map "$dir/map.bowmap" \
       --images "$src/map.txt" >&2
   fi

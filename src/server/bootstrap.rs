@@ -160,9 +160,23 @@ fn load_orb_pass(
             return Ok(None);
         }
     };
+    let built = (pass.meta.keypoints, pass.meta.grid);
+    if built != (params.keypoints, params.grid().ok().flatten()) {
+        let grid = built.1.map_or("none".into(), |(c, r)| format!("{c}x{r}"));
+        tracing::warn!(
+            path = %path.display(),
+            "this ORB side was built with {} keypoints per image and grid `{grid}`, not the {} \
+             and `{}` of [orb_pass]: its queries are detected as its images were; rebuild it \
+             with `bowloc map orb-pass` to use the configured ones",
+            built.0,
+            params.keypoints,
+            params.grid
+        );
+    }
     tracing::info!(
         path = %path.display(),
         images = pass.meta.map_images,
+        keypoints = pass.meta.keypoints,
         enabled = params.enabled,
         "ORB pass loaded"
     );
