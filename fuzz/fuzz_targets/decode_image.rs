@@ -8,6 +8,7 @@
 #![no_main]
 
 use bowloc::features::orb::OrbDetector;
+use bowloc::orb_pass::ORB_FEATURES;
 use bowloc::features::{
     DecodeLimits, ExtractConfig, Frame, TileGrid, Tiles, decode, extract, probe, thumbnail,
 };
@@ -42,7 +43,7 @@ fuzz_target!(|data: &[u8]| {
         };
         if let Ok(frame) = Frame::new(&image, &orb_config) {
             for grid in [None, Some((2, 2))] {
-                if let Ok(mut orb) = OrbDetector::new(grid) {
+                if let Ok(mut orb) = OrbDetector::new(ORB_FEATURES, grid) {
                     let _ = orb.detect(&frame);
                 }
             }
