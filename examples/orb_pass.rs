@@ -1,13 +1,14 @@
 //! An ORB pass before SIFT, measured against the service's answers: a
 //! prototype of a cheap first look that would answer the easy queries
 //! without SIFT, as the library has it (`bowloc::orb_pass`). Per query, on
-//! the service's 640 px frame: ORB (`ORB_PASS_KEYPOINTS`, by default the
-//! service's, spread over a grid of cells, `ORB_PASS_GRID`; `bowloc::features::orb`), each descriptor's
-//! binary word (`bowloc::vocabulary::binary`, K words by k-majority over
-//! the map's ORB descriptors, drawn with the SIFT vocabulary's seed),
-//! tf-idf votes over the map images, and the top 10 (`ORB_PASS_TOP`)
-//! verified by a similarity (RANSAC, 6 px, OpenCV's fixed seed) on word
-//! pairs (each query feature paired with the nearest map feature of its
+//! the service's 640 px frame: ORB (`ORB_PASS_KEYPOINTS` keypoints, by
+//! default the service's, spread over a grid of cells, `ORB_PASS_GRID`;
+//! `bowloc::features::orb`), each descriptor's binary word
+//! (`bowloc::vocabulary::binary`, K words by k-majority over the map's ORB
+//! descriptors, drawn with the SIFT vocabulary's seed), tf-idf votes over
+//! the map images, and the best-voted (`ORB_PASS_TOP`, by default the
+//! service's `orb_pass.top`) verified by a similarity (RANSAC, 6 px,
+//! OpenCV's fixed seed) on word pairs (each query feature paired with the nearest map feature of its
 //! word, at most 64 bits away), the inliers counted as the service's
 //! verification counts them and their scale the spread of the map's
 //! inliers over the query's. A [`Setting`] says when the pass answers and
@@ -56,15 +57,18 @@ use bowloc::search::SearchOptions;
 use bowloc::server::config::Config;
 use std::time::Instant;
 
-/// Candidates verified, in vote order (`ORB_PASS_TOP`, default 10).
-fn top_from_env() -> anyhow::Result<usize> {
-    match std::env::var("ORB_PASS_TOP") {
-        Err(_) => Ok(10),
+/// A positive count from the environment variable `name`, `default`
+/// when it is not set: `ORB_PASS_TOP`, the candidates verified in vote
+/// order, and `ORB_PASS_KEYPOINTS`, ORB's keypoints per image (both by
+/// default the service's).
+fn count_from_env(name: &str, default: usize) -> anyhow::Result<usize> {
+    match std::env::var(name) {
+        Err(_) => Ok(default),
         Ok(v) => v
             .parse()
             .ok()
             .filter(|&n| n > 0)
-            .ok_or_else(|| anyhow::anyhow!("ORB_PASS_TOP={v}: want a positive count")),
+            .ok_or_else(|| anyhow::anyhow!("{name}={v}: want a positive count")),
     }
 }
 /// The settings printed in full, each with the queries it gets wrong where
@@ -104,18 +108,6 @@ fn grid_from_env() -> anyhow::Result<String> {
     let v = std::env::var("ORB_PASS_GRID").unwrap_or_else(|_| "4x3".into());
     parse_grid(&v).map_err(|e| anyhow::anyhow!("ORB_PASS_GRID={e}"))?;
     Ok(v)
-}
-
-/// ORB keypoints per image (`ORB_PASS_KEYPOINTS`, default the service's).
-fn keypoints_from_env() -> anyhow::Result<usize> {
-    match std::env::var("ORB_PASS_KEYPOINTS") {
-        Err(_) => Ok(OrbPassParams::default().keypoints),
-        Ok(v) => v
-            .parse()
-            .ok()
-            .filter(|&n| n > 0)
-            .ok_or_else(|| anyhow::anyhow!("ORB_PASS_KEYPOINTS={v}: want a positive count")),
-    }
 }
 
 /// What the pass found for one query: each checked candidate in vote
@@ -171,11 +163,12 @@ fn main() -> anyhow::Result<()> {
     let verify = config.verify.enabled;
     let seed = localizer.vocab.meta().seed;
     let read = |r: &bowloc::dataset::ImageRef| std::fs::read(&r.path);
+    let service = OrbPassParams::default();
     let params = OrbPassParams {
-        top: top_from_env()?,
-        keypoints: keypoints_from_env()?,
+        top: count_from_env("ORB_PASS_TOP", service.top)?,
+        keypoints: count_from_env("ORB_PASS_KEYPOINTS", service.keypoints)?,
         grid: grid_from_env()?,
-        ..OrbPassParams::default()
+        ..service
     };
     params.validate().map_err(anyhow::Error::msg)?;
     let side = build_orb_side(&localizer, &dataset.map, &params)?;

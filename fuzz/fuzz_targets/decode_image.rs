@@ -8,7 +8,7 @@
 #![no_main]
 
 use bowloc::features::orb::OrbDetector;
-use bowloc::orb_pass::ORB_FEATURES;
+use bowloc::orb_pass::ORB_KEYPOINTS;
 use bowloc::features::{
     DecodeLimits, ExtractConfig, Frame, TileGrid, Tiles, decode, extract, probe, thumbnail,
 };
@@ -43,7 +43,7 @@ fuzz_target!(|data: &[u8]| {
         };
         if let Ok(frame) = Frame::new(&image, &orb_config) {
             for grid in [None, Some((2, 2))] {
-                if let Ok(mut orb) = OrbDetector::new(ORB_FEATURES, grid) {
+                if let Ok(mut orb) = OrbDetector::new(ORB_KEYPOINTS, grid) {
                     let _ = orb.detect(&frame);
                 }
             }

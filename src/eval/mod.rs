@@ -899,11 +899,11 @@ fn replay_orb_pass(
         .map(|q| q.tiles.iter().map(|t| t.ms).sum())
         .collect();
     let mut looks = orb_pass::look_all(&dataset.queries, extract, &passes, config.place_window);
-    for look in looks
+    for (look, &ms) in looks
         .iter_mut()
         .flat_map(|seed| seed.iter_mut().zip(&cached_sift))
     {
-        look.0.price(*look.1);
+        look.price(ms);
     }
     let mut alone: Vec<usize> = vec![plan.verified(0)];
     for &i in &plan.explicit {

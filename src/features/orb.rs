@@ -4,6 +4,7 @@
 
 use super::{FeatureError, Frame};
 use crate::orb_pass::OrbImage;
+use crate::orb_pass::params::check_keypoints;
 use crate::vocabulary::binary::from_rows;
 use opencv::core::{KeyPoint, Mat, Ptr, Vector, no_array};
 use opencv::features2d::{ORB, ORB_ScoreType};
@@ -26,18 +27,7 @@ impl OrbDetector {
     /// detects four times as many and the strongest of each cell are kept,
     /// an equal share each, so the keypoints cover the frame.
     pub fn new(keypoints: usize, grid: Option<(usize, usize)>) -> Result<Self, FeatureError> {
-        if keypoints == 0 || i32::try_from(keypoints.saturating_mul(4)).is_err() {
-            return Err(FeatureError::OpenCv(format!(
-                "{keypoints} ORB keypoints: want 1 or more"
-            )));
-        }
-        if let Some((cols, rows)) = grid
-            && !(1..=keypoints).contains(&cols.saturating_mul(rows))
-        {
-            return Err(FeatureError::OpenCv(format!(
-                "an ORB grid of {cols}x{rows} cells: want 1 to {keypoints} cells"
-            )));
-        }
+        check_keypoints(keypoints, grid).map_err(FeatureError::OpenCv)?;
         let features = keypoints * if grid.is_some() { 4 } else { 1 };
         let orb = ORB::create(
             features as i32,

@@ -24,7 +24,7 @@ pub use pick::{PLACE_APART, Pick, Setting, answer};
 
 /// ORB keypoints a query or map image keeps by default
 /// (`orb_pass.keypoints`).
-pub const ORB_FEATURES: usize = 2000;
+pub const ORB_KEYPOINTS: usize = 2000;
 
 /// The most ORB keypoints `orb_pass.keypoints` may ask for.
-pub const MAX_ORB_FEATURES: usize = 20_000;
+pub const MAX_ORB_KEYPOINTS: usize = 20_000;

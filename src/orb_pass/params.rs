@@ -2,7 +2,7 @@
 //! ([`OrbPassParams`]), and the similarity its candidates are verified with
 //! ([`FIT`]).
 
-use super::{MAX_ORB_FEATURES, ORB_FEATURES, Pick, Setting};
+use super::{MAX_ORB_KEYPOINTS, ORB_KEYPOINTS, Pick, Setting};
 use crate::geometry::verify::{Estimator, FitParams, Model};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -62,13 +62,13 @@ impl Default for OrbPassParams {
             share: 0.9,
             agree: true,
             words: 1000,
-            keypoints: ORB_FEATURES,
+            keypoints: ORB_KEYPOINTS,
             grid: "none".into(),
         }
     }
 }
 
-/// `none`, or `COLSxROWS` with 1 to [`MAX_ORB_FEATURES`] cells (a grid
+/// `none`, or `COLSxROWS` with 1 to [`MAX_ORB_KEYPOINTS`] cells (a grid
 /// needs at least a keypoint a cell: [`OrbPassParams::validate`]).
 pub fn parse_grid(v: &str) -> Result<Option<(usize, usize)>, String> {
     if v == "none" {
@@ -78,10 +78,10 @@ pub fn parse_grid(v: &str) -> Result<Option<(usize, usize)>, String> {
         .and_then(|(c, r)| Some((c.parse().ok()?, r.parse().ok()?)))
         .filter(|&(c, r): &(usize, usize)| {
             c.checked_mul(r)
-                .is_some_and(|n| (1..=MAX_ORB_FEATURES).contains(&n))
+                .is_some_and(|n| (1..=MAX_ORB_KEYPOINTS).contains(&n))
         })
         .map(Some)
-        .ok_or_else(|| format!("`{v}`: want COLSxROWS (1 to {MAX_ORB_FEATURES} cells) or none"))
+        .ok_or_else(|| format!("`{v}`: want COLSxROWS (1 to {MAX_ORB_KEYPOINTS} cells) or none"))
 }
 
 impl OrbPassParams {
@@ -122,20 +122,35 @@ impl OrbPassParams {
         if !(2..=65536).contains(&self.words) {
             return Err(format!("words must be 2 to 65536, got {}", self.words));
         }
-        if !(1..=MAX_ORB_FEATURES).contains(&self.keypoints) {
-            return Err(format!(
-                "keypoints must be 1 to {MAX_ORB_FEATURES}, got {}",
-                self.keypoints
-            ));
-        }
-        match self.grid()? {
-            Some((cols, rows)) if cols * rows > self.keypoints => Err(format!(
-                "grid {cols}x{rows} has more cells than the {} keypoints to spread over them",
-                self.keypoints
-            )),
-            _ => Ok(()),
-        }
+        check_keypoints(self.keypoints, self.grid()?)
     }
+}
+
+/// Whether ORB can keep `keypoints` per image spread over `grid`: 1 to
+/// [`MAX_ORB_KEYPOINTS`] of them, and at least one cell but no more cells
+/// than keypoints. The
+/// setting is checked with it, and so is every detector made
+/// (`features::orb`), whose keypoints may come from a side's file.
+pub fn check_keypoints(keypoints: usize, grid: Option<(usize, usize)>) -> Result<(), String> {
+    if !(1..=MAX_ORB_KEYPOINTS).contains(&keypoints) {
+        return Err(format!(
+            "keypoints must be 1 to {MAX_ORB_KEYPOINTS}, got {keypoints}"
+        ));
+    }
+    match grid {
+        Some((cols, rows)) if cols.saturating_mul(rows) == 0 => {
+            Err(format!("grid {cols}x{rows} has no cells"))
+        }
+        Some((cols, rows)) if cols.saturating_mul(rows) > keypoints => Err(format!(
+            "grid {cols}x{rows} has more cells than the {keypoints} keypoints to spread over them"
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// How a grid is written: `none` or `COLSxROWS` ([`parse_grid`]'s input).
+pub fn grid_name(grid: Option<(usize, usize)>) -> String {
+    grid.map_or("none".into(), |(cols, rows)| format!("{cols}x{rows}"))
 }
 
 #[cfg(test)]
@@ -207,6 +222,9 @@ mod tests {
             .contains("more cells")
         );
         assert_eq!(parse_grid("4x3"), Ok(Some((4, 3))));
+        for grid in [None, Some((4, 3))] {
+            assert_eq!(parse_grid(&grid_name(grid)), Ok(grid));
+        }
         assert!(parse_grid("0x3").is_err());
         assert!(parse_grid("400x300").is_err());
         // a product past usize is refused, not wrapped

@@ -162,7 +162,7 @@ fn load_orb_pass(
     };
     let built = (pass.meta.keypoints, pass.meta.grid);
     if built != (params.keypoints, params.grid().ok().flatten()) {
-        let grid = built.1.map_or("none".into(), |(c, r)| format!("{c}x{r}"));
+        let grid = crate::orb_pass::params::grid_name(built.1);
         tracing::warn!(
             path = %path.display(),
             "this ORB side was built with {} keypoints per image and grid `{grid}`, not the {} \
