@@ -29,10 +29,11 @@
 # (`sequence=…&frame=N`, N the query's line; one sequence per pass), so the
 # sequence filter's stop (`sequence.rule`) decides where they stop; the full
 # search is sent alone, as before.
-# LATENCY_ORB_PASS=1: the ORB pass looks at each of the default's requests
-# first ([orb_pass] enabled; each map's ORB side built beside it with
-# `bowloc map orb-pass`, afresh each run); the comparison says how many it
-# answered.
+# LATENCY_ORB_PASS: the ORB pass looks at each of the default's requests
+# first, as the configuration has it by default (each map's ORB side built
+# beside it with `bowloc map orb-pass`, afresh each run); the comparison says
+# how many it answered. LATENCY_ORB_PASS=0 turns it off ([orb_pass]
+# enabled = false): the default without the pass.
 # The comparison also prints recall@1 and recall@5 of the full search's and
 # the default's answers against the dataset's ground truth.
 # The server learns the coarse pass (`tiles = "…,auto"`) from the requests
@@ -43,6 +44,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 . scripts/lib/server.sh
 name=${LATENCY_DATASET:-gardens-point}
+# the ORB pass: on unless LATENCY_ORB_PASS=0 (orb_on empty when off)
+orb_on=true
+[ "${LATENCY_ORB_PASS:-1}" = 0 ] && orb_on=
 seeds=${LATENCY_SEEDS:-1}
 case $name in
   gardens-point | gardens-point-reversed) default_every=10 words=5000 ;;
@@ -63,7 +67,7 @@ map_for() {
   local dir
   dir=$(map_dir "$base" "$1")
   # the side is built afresh, so that it is the current default's
-  if [ -n "${LATENCY_ORB_PASS:-}" ]; then
+  if [ -n "$orb_on" ]; then
     "$BOWLOC_BIN" map orb-pass --vocab "$dir/vocab.bowvoc" --map "$dir/map.bowmap" \
       --images "$src/map.txt" >&2
   fi
@@ -75,8 +79,8 @@ tmp=$(mktemp -d)
 trap 'stop_server; rm -rf "$tmp"' EXIT
 plan=${LATENCY_PLAN:+[search]
 tiles = \"$LATENCY_PLAN\"}
-orb=${LATENCY_ORB_PASS:+[orb_pass]
-enabled = true}
+orb="[orb_pass]
+enabled = ${orb_on:-false}"
 col() { cut -f"$1" "$tmp/rows" | median; }
 # "LINE PATH" of each query used
 queries() { awk -v e="$every" 'NR % e == 1 || e == 1 {print NR, $0}' $src/queries.txt; }
@@ -106,7 +110,7 @@ breakdown() {
   local share
   share=$(awk -F'\t' '{print 100 * ($1 - $3) / $1}' "$tmp/rows" | median)
   echo "dataset=$name requests=$(wc -l <"$tmp/rows") rule=$(jq -r '.rule.name + " " + (.rule.value | tostring) + (if .rule.or_verified then " or verified \(.rule.or_verified)" else "" end)' "$tmp/answer.json")"
-  echo "median_ms request=$(col 1) decode=$(col 2) extract=$(col 3) quantize=$(col 4) vote=$(col 5) verify=$(col 8)${LATENCY_ORB_PASS:+ orb_pass=$(col 10)} server_total=$(col 6) fraction_used=$(col 7)"
+  echo "median_ms request=$(col 1) decode=$(col 2) extract=$(col 3) quantize=$(col 4) vote=$(col 5) verify=$(col 8)${orb_on:+ orb_pass=$(col 10)} server_total=$(col 6) fraction_used=$(col 7)"
   echo "verified (geometric verification ran): $(cut -f9 "$tmp/rows" | grep -c yes) of $(wc -l <"$tmp/rows") requests"
   echo "median share of a request that is not SIFT extraction: ${share}%"
 }
@@ -145,7 +149,7 @@ compare() {
   }
   local orb_answered
   orb_answered=$(awk -F'\t' '$5 == "orb-pass" {c++} END {printf "%d of %d", c, NR}' "$tmp/pairs")
-  echo "vocabulary seed $1: recall@1 full search $(recall 7 1), default $(recall 8 1); recall@5 full search $(recall 7 5), default $(recall 8 5)${LATENCY_ORB_PASS:+; answered by the ORB pass: $orb_answered}"
+  echo "vocabulary seed $1: recall@1 full search $(recall 7 1), default $(recall 8 1); recall@5 full search $(recall 7 5), default $(recall 8 5)${orb_on:+; answered by the ORB pass: $orb_answered}"
   echo "$1 $ratio $per_query" >>"$tmp/ratios"
 }
 

@@ -269,7 +269,7 @@ impl SearchArgs {
             tile_order: self.tile_order,
             given_order: false,
             spare_core: None,
-            // `query --orb-pass` turns it on, with the map's ORB side
+            // `query` turns it on when the map has its ORB side
             orb_pass: false,
         })
     }

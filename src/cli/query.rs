@@ -34,11 +34,12 @@ pub struct QueryArgs {
     tiles: Option<TileGrid>,
     #[command(flatten)]
     verify: VerifyArgs,
-    /// Let the ORB pass look at each image first, with the map's ORB side
-    /// beside it (MAP.orbpass, from `bowloc map orb-pass`) and the
-    /// service's default setting (`[orb_pass]`).
+    /// Do not let the ORB pass look at each image first. By default it does,
+    /// as the service's, when the map has its ORB side beside it
+    /// (MAP.orbpass, from `bowloc map orb-pass`), with the service's default
+    /// setting (`[orb_pass]`).
     #[arg(long)]
-    orb_pass: bool,
+    no_orb_pass: bool,
     /// Run the images, in the order given, as the frames of one camera
     /// through the sequence filter (each answer's `sequence` has the filtered
     /// candidates); frames stop by the service's sequence rule unless
@@ -56,11 +57,13 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     localizer.set_verify(a.verify.params()?);
     let model = a.model.model()?;
     let snapshot = localizer.map.snapshot();
-    if a.orb_pass {
-        let side = bowloc::orb_pass::file::path_beside(&a.files.map);
+    let side = bowloc::orb_pass::file::path_beside(&a.files.map);
+    if !a.no_orb_pass && side.exists() {
         let params = bowloc::orb_pass::OrbPassParams::default();
-        let pass = bowloc::pipeline::OrbPass::open(&side, snapshot.base().meta(), &params)?;
-        localizer.orb_pass = Some(pass);
+        match bowloc::pipeline::OrbPass::open(&side, snapshot.base().meta(), &params) {
+            Ok(pass) => localizer.orb_pass = Some(pass),
+            Err(e) => tracing::warn!("{e:#}: the ORB pass is off"),
+        }
     }
     let mut options = if a.sequence {
         // the frames stop by the sequence's rule, as the service's do
@@ -71,7 +74,7 @@ pub fn run(a: QueryArgs) -> anyhow::Result<()> {
     } else {
         a.search.options()?
     };
-    options.orb_pass = a.orb_pass;
+    options.orb_pass = localizer.orb_pass.is_some();
     let topology = Topology::of(
         TopologyKind::Auto,
         snapshot.id_range(),

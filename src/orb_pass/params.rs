@@ -23,8 +23,9 @@ pub const FIT: FitParams = FitParams {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OrbPassParams {
-    /// Run the pass when the request does not say (`orb_pass=`). The map
-    /// needs its ORB side (`bowloc map orb-pass`).
+    /// Run the pass when the request does not say (`orb_pass=`); on by
+    /// default. The map needs its ORB side (`bowloc map orb-pass`); a map
+    /// without one is served without the pass.
     pub enabled: bool,
     /// The map's ORB side; empty: `MAP.orbpass` beside the map.
     pub file: PathBuf,
@@ -54,7 +55,7 @@ pub struct OrbPassParams {
 impl Default for OrbPassParams {
     fn default() -> Self {
         Self {
-            enabled: false,
+            enabled: true,
             file: PathBuf::new(),
             top: 10,
             floor: 12,

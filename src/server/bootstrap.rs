@@ -121,9 +121,10 @@ pub fn load(config: &Config, progress: &Progress) -> anyhow::Result<Localizer> {
 
 /// The map's ORB side for the ORB pass: opened when its file exists
 /// (requests may then ask for the pass with `orb_pass=true`). When
-/// `orb_pass.enabled`, a missing side is an error, except that bootstrap
-/// builds the default map's (`bootstraps`; also when it was built for
-/// another map). A side built for another map (or before the map's
+/// `orb_pass.enabled` (the default), bootstrap builds the default map's
+/// side if it is missing (`bootstraps`; also when it was built for another
+/// map); any other map without one is served without the pass, with a
+/// warning that says how to build it. A side built for another map (or before the map's
 /// changes were folded into it) is left out with a warning: the service
 /// answers without the pass until it is rebuilt.
 fn load_orb_pass(
@@ -147,13 +148,17 @@ fn load_orb_pass(
             side.save(&path)?;
             crate::pipeline::OrbPass::new(side, params)
         }
-        Err(_) if !path.exists() && params.enabled => bail!(
-            "{} is missing and orb_pass.enabled is set: build the map's ORB side with \
-             `bowloc map orb-pass --vocab {} --map {} --images IMAGES` (the map's image list)",
-            path.display(),
-            config.files.vocabulary.display(),
-            config.files.map.display()
-        ),
+        Err(_) if !path.exists() && params.enabled => {
+            tracing::warn!(
+                path = %path.display(),
+                "the map has no ORB side, so the ORB pass is off: build it with \
+                 `bowloc map orb-pass --vocab {} --map {} --images IMAGES` (the map's image \
+                 list), or set orb_pass.enabled = false",
+                config.files.vocabulary.display(),
+                config.files.map.display()
+            );
+            return Ok(None);
+        }
         Err(_) if !path.exists() => return Ok(None),
         Err(e) => {
             tracing::warn!("{e:#}: the ORB pass is off");

@@ -827,7 +827,7 @@ fi
 
 # --- bootstrap: only the default files, its progress on /readyz ----------------
 # In an empty folder the default files (data/default/…) are missing; bootstrap
-# builds them from rtabmap-loop with 200 words. A mistyped --map is never
+# builds them from rtabmap-loop with 200 words, and the map's ORB side. A mistyped --map is never
 # built: serve exits naming it.
 mkdir -p "$TMP/boot"
 cat >"$TMP/boot/config.toml" <<TOML
@@ -863,6 +863,7 @@ if launch config.toml "$TMP/boot.log" "$TMP/boot"; then
   }
   check "bootstrap reports its steps on /readyz, then is ready (${#steps[@]} steps seen)" reported
   check "bootstrap built the default files" test -f "$TMP/boot/data/default/vocab.bowvoc" -a -f "$TMP/boot/data/default/map.bowmap"
+  check "bootstrap built the default map's ORB side (the pass is on by default)" test -f "$TMP/boot/data/default/map.orbpass"
   kill -TERM "$PID"; wait "$PID"
 else
   fail "bootstrap server starts"
