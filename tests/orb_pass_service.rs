@@ -78,6 +78,18 @@ async fn post(
     (status, serde_json::from_slice(&bytes).unwrap())
 }
 
+/// `/map`'s `orb_pass`: the side loaded, as the service reports it.
+async fn map_orb_pass(state: &Arc<AppState>) -> serde_json::Value {
+    let request = Request::get("/map").body(Body::empty()).unwrap();
+    let response = router(state.clone()).oneshot(request).await.unwrap();
+    assert_eq!(response.status(), StatusCode::OK);
+    let bytes = axum::body::to_bytes(response.into_body(), 1 << 24)
+        .await
+        .unwrap();
+    let map: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+    map["orb_pass"].clone()
+}
+
 async fn localize(state: &Arc<AppState>, query: &str, image: Vec<u8>) -> serde_json::Value {
     let (status, answer) = post(state, query, image).await;
     assert_eq!(status, StatusCode::OK, "{answer}");
@@ -121,6 +133,15 @@ async fn the_pass_answers_easy_queries_without_sift_and_leaves_the_rest() {
     );
     let state = AppState::new(config.clone()).unwrap();
     state.set_localizer(localizer);
+    let side = map_orb_pass(&state).await;
+    assert_eq!(side["enabled"], true, "{side}");
+    assert_eq!(side["current"], true, "{side}");
+    assert_eq!(side["keypoints"], bowloc::orb_pass::ORB_KEYPOINTS, "{side}");
+    assert_eq!(side["grid"], "none", "{side}");
+    assert!(
+        side["file"].as_str().unwrap().ends_with("m.orbpass"),
+        "{side}"
+    );
 
     let data = Dataset::open(&common::dataset("rtabmap-loop")).unwrap();
     let (mut answered, mut right) = (0, 0);
@@ -209,6 +230,7 @@ async fn the_pass_answers_easy_queries_without_sift_and_leaves_the_rest() {
     assert!(localizer.orb_pass.is_some());
     let state = AppState::new(off).unwrap();
     state.set_localizer(localizer);
+    assert_eq!(map_orb_pass(&state).await["enabled"], false);
     let a = localize(&state, "", image.clone()).await;
     assert!(a.get("orb_pass").is_none(), "{a}");
     let a = localize(&state, "orb_pass=true", image).await;

@@ -663,7 +663,7 @@ impl Localizer {
             && tracing == Tracing::Off
             && options.prior.is_none()
             && options.rule.info().stops_early
-            && snapshot.generation() == pass.meta.map_generation;
+            && pass.is_current(snapshot.generation());
         may.then_some(pass)
     }
 

@@ -160,6 +160,13 @@ impl OrbPass {
         }
     }
 
+    /// Whether the side answers for the map at `generation`: it has no
+    /// changes since the side was built (a live map's adds and removes are
+    /// not in it until it is rebuilt for the compacted map).
+    pub fn is_current(&self, generation: u64) -> bool {
+        generation == self.meta.map_generation
+    }
+
     /// Look at a query in its extraction frame (the one SIFT goes on with
     /// if the pass does not answer): ORB, its words voted over the map, the
     /// best-voted checked, and the setting's answer if it answers.

@@ -7,7 +7,7 @@ use super::body::ImageUpload;
 use super::errors::{ErrorBody, ErrorDetail};
 use super::images::{self, Compacted, ImageItem, ImagePage, Written};
 use super::localize;
-use super::status::{self, MapInfo, PlanCost, PlanInfo, Status};
+use super::status::{self, MapInfo, OrbPassInfo, PlanCost, PlanInfo, Status};
 use super::{page, thumbnails};
 use crate::report::{
     Candidate, CandidateMatches, FeatureUse, FilteredCandidate, FullRace, ImageSize, Localization,
@@ -50,7 +50,7 @@ use utoipa::openapi::schema::{ObjectBuilder, Type};
     ),
     components(schemas(
         Localization, Candidate, FeatureUse, RuleReport, StopInfo, ImageSize, Timings,
-        MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, PlanInfo, PlanCost, ImageUpload, Binary, RaceTrace,
+        MapIdentity, ErrorBody, ErrorDetail, Status, MapInfo, PlanInfo, PlanCost, OrbPassInfo, ImageUpload, Binary, RaceTrace,
         RacePoint, FullRace, CandidateMatches, SequenceAnswer, FilteredCandidate,
         ImageItem, ImagePage, Written, Compacted, crate::live::Compaction,
         crate::live::ChangesInfo,

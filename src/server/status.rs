@@ -72,6 +72,28 @@ pub struct MapInfo {
     /// `,auto`); absent when the plan is fixed.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub extraction_plan: Option<PlanInfo>,
+    /// The ORB pass's side, when one is loaded for the map; absent when
+    /// the map has none (the pass is off, whatever `orb_pass.enabled` says).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orb_pass: Option<OrbPassInfo>,
+}
+
+/// The ORB pass as loaded.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct OrbPassInfo {
+    /// The pass looks at requests that do not say (`orb_pass.enabled`).
+    pub enabled: bool,
+    /// It may run now: false while the map has changes its side does not
+    /// have (until the side is rebuilt for the compacted map).
+    pub current: bool,
+    /// The side's file.
+    pub file: String,
+    /// ORB keypoints per image its map images kept (its queries keep as
+    /// many), the grid they were spread over (`none`: ORB's own strongest
+    /// corners) and its binary words.
+    pub keypoints: usize,
+    pub grid: String,
+    pub words: usize,
 }
 
 /// What the service has learned of its extraction plans.
@@ -155,6 +177,14 @@ pub async fn map(State(state): State<Arc<AppState>>) -> Result<Json<MapInfo>, Ap
             .coarse_choice
             .as_ref()
             .map(|choice| PlanInfo::of(choice, state.plan_memory())),
+        orb_pass: l.orb_pass.as_ref().map(|pass| OrbPassInfo {
+            enabled: state.config.orb_pass.enabled,
+            current: pass.is_current(snapshot.generation()),
+            file: state.config.orb_pass_file().display().to_string(),
+            keypoints: pass.meta.keypoints,
+            grid: crate::orb_pass::params::grid_name(pass.meta.grid),
+            words: pass.meta.words,
+        }),
     }))
 }
 
