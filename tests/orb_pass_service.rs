@@ -60,6 +60,16 @@ fn files(dir: &std::path::Path) -> (PathBuf, PathBuf) {
     (v, m)
 }
 
+/// `request` through the service's router: the status and the JSON body.
+async fn send(state: &Arc<AppState>, request: Request<Body>) -> (StatusCode, serde_json::Value) {
+    let response = router(state.clone()).oneshot(request).await.unwrap();
+    let status = response.status();
+    let bytes = axum::body::to_bytes(response.into_body(), 1 << 24)
+        .await
+        .unwrap();
+    (status, serde_json::from_slice(&bytes).unwrap())
+}
+
 /// `/localize?{query}` of `image`: the status and the JSON body.
 async fn post(
     state: &Arc<AppState>,
@@ -70,23 +80,13 @@ async fn post(
         .header(header::CONTENT_TYPE, "image/jpeg")
         .body(Body::from(image))
         .unwrap();
-    let response = router(state.clone()).oneshot(request).await.unwrap();
-    let status = response.status();
-    let bytes = axum::body::to_bytes(response.into_body(), 1 << 24)
-        .await
-        .unwrap();
-    (status, serde_json::from_slice(&bytes).unwrap())
+    send(state, request).await
 }
 
 /// `/map`'s `orb_pass`: the side loaded, as the service reports it.
 async fn map_orb_pass(state: &Arc<AppState>) -> serde_json::Value {
-    let request = Request::get("/map").body(Body::empty()).unwrap();
-    let response = router(state.clone()).oneshot(request).await.unwrap();
-    assert_eq!(response.status(), StatusCode::OK);
-    let bytes = axum::body::to_bytes(response.into_body(), 1 << 24)
-        .await
-        .unwrap();
-    let map: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+    let (status, map) = send(state, Request::get("/map").body(Body::empty()).unwrap()).await;
+    assert_eq!(status, StatusCode::OK, "{map}");
     map["orb_pass"].clone()
 }
 

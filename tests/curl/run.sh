@@ -153,6 +153,11 @@ check "GET /healthz is 200 alive" test "$(req "$B" "$BASE/healthz")/$(jq -r .sta
 check "GET /readyz is 200 ready" test "$(req "$B" "$BASE/readyz")/$(jq -r .status "$B")" = "200/ready"
 check "GET /map names the loaded map" test \
   "$(req "$B" "$BASE/map")/$(jq -r '.identity.name, .identity.images, .map.images' "$B" | paste -sd/)" = "200/rtabmap-loop/40/40"
+# the pass is on by default, but this map has no ORB side: served without it,
+# a warning naming the command that builds one, and no orb_pass in /map
+check "a map without its ORB side: start-up warns how to build it" \
+  grep -q "the map has no ORB side, so the ORB pass is off: build it with .bowloc map orb-pass" "$TMP/server.log"
+check "GET /map has no orb_pass without a side" test "$(req "$B" "$BASE/map")/$(jq -r 'has("orb_pass")' "$B")" = "200/false"
 req "$TMP/openapi.json" "$BASE/openapi.json" >/dev/null
 check "GET /openapi.json equals docs/openapi.json" cmp -s "$TMP/openapi.json" "$ROOT/docs/openapi.json"
 
